@@ -1,0 +1,1 @@
+"""One module per ``crossway`` subcommand: each exposes ``add_parser(subparsers)``."""
