@@ -37,9 +37,9 @@ def bicycle_step(x, y, heading, speed, acceleration, steering, dt: float = DT):
 
 
 def turning_radius(steering: float) -> float:
-    """Closed-form radius [m] of the circle the reference point follows at constant steering [rad]."""
+    """Closed-form radius [m] of the circle the reference point follows at constant steering [rad] (either sign)."""
     beta = np.arctan(0.5 * np.tan(steering))
-    return float(0.5 * WHEELBASE / np.sin(beta))
+    return float(abs(0.5 * WHEELBASE / np.sin(beta)))
 
 
 def box_corners(x, y, heading, length: float = VEHICLE_LENGTH, width: float = VEHICLE_WIDTH) -> np.ndarray:
