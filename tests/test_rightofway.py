@@ -143,8 +143,8 @@ def test_random_signs_are_never_all_equal():
 def test_yield_car_sees_main_road_car_as_higher_priority(medium_road):
     """Behaviour: the obstacle view encodes who goes first (paper, Fig. 2d)."""
     sim = medium_road
-    yield_car = place(sim, "south_0", "straight", s=32.0, sign=Sign.YIELD, speed=5.0)
-    main_car = place(sim, "east_0", "straight", s=32.0, sign=Sign.NONE, speed=5.0)
+    yield_car = place(sim, "south_0", "straight", s=38.0, sign=Sign.YIELD, speed=5.0)
+    main_car = place(sim, "east_0", "straight", s=38.0, sign=Sign.NONE, speed=5.0)
     result = sim.step(still(sim))
     assert result.observed[[yield_car, main_car]].all()
     newest_obstacles = 2 * 4 + 3
