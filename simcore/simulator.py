@@ -227,6 +227,7 @@ class Simulator:
         ended[idx] = reasons != EndReason.RUNNING
         result.end_reason[idx] = reasons
         result.terminated[:] = ended
+        self._schedule_waits(ended)
         # "hard": signs are redrawn together and every episode restarts (paper, "Environment")
         if self.time_s >= self.next_sign_change_s - 1e-9:
             cut = self.present & ~ended
@@ -237,7 +238,6 @@ class Simulator:
         for slot in np.flatnonzero(ended):
             result.episodes.append(self._summary(slot, EndReason(result.end_reason[slot])))
         blocked = ended.copy()  # a lane that just ended waits at least one step
-        self._schedule_waits(ended)
         seen = self.present.copy()
         self.present &= ~ended
         self._start_due(result, blocked)
