@@ -3,6 +3,10 @@
 It reads the simulator's state directly (privileged information a learner never gets) and
 exists so that anyone can watch the simulator, benchmark it and test it without a trained
 model. It is not the paper's TTC baseline.
+
+Right of way: before a conflict zone it stops while a car with priority (``rightofway``) is in
+that zone or will reach it within ``YIELD_HORIZON_S``; after waiting ``PATIENCE_S`` at a stand
+it goes anyway, which breaks the rare priority cycles (three arms with equal signs).
 """
 
 from __future__ import annotations
@@ -11,11 +15,13 @@ import math
 
 import numpy as np
 
-from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
+from simcore.dynamics import DT, MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
 from simcore.simulator import Simulator
 
 STOP_MARGIN_M = 2.0  # stop this far before a conflict zone [m]
-FOLLOW_GAP_M = 8.0  # keep at least this gap to a car ahead [m]
+YIELD_HORIZON_S = 5.0  # yield to a car with priority that reaches the conflict within this time [s]
+PATIENCE_S = 4.0  # after standing this long, go [s]
+SPEED_GAIN = 1.5  # proportional speed control [1/s]
 
 
 class ScriptedDriver:
@@ -25,36 +31,45 @@ class ScriptedDriver:
         self.sim = sim
         self.speed_fraction = speed_fraction  # cruise at this fraction of the target speed
         self.yield_to_priority = yield_to_priority
+        self._standing_s = np.zeros(sim.num_slots)
 
     def act(self) -> np.ndarray:
         sim = self.sim
         actions = np.zeros((sim.num_slots, 2))
         idx = np.flatnonzero(sim.present)
+        self._standing_s[~sim.present] = 0.0
         if len(idx) == 0:
             return actions
         higher = sim.priorities(idx) if self.yield_to_priority else np.zeros((len(idx),) * 2, bool)
-        table = sim.priority
+        zone_start = sim.priority.zone_start
+        half = 0.5 * VEHICLE_LENGTH
         for a, slot in enumerate(idx.tolist()):
-            path = sim._route_paths[sim.route[slot]]
+            path = sim.intersection.routes[sim.route[slot]].path
             speed = sim.speed[slot]
+            s_front = sim.s[slot] + half
+            # pure pursuit towards a point on the centre line ahead
             lookahead = max(6.0, 1.2 * speed)
-            tx, ty = path.position(min(sim.s[slot] + lookahead, path.length + lookahead), 0.0)
+            tx, ty = path.position(sim.s[slot] + lookahead, 0.0)
             alpha = math.atan2(ty - sim.y[slot], tx - sim.x[slot]) - sim.heading[slot]
             steering = math.atan2(2.0 * WHEELBASE * math.sin(alpha), lookahead)
-            desired = self.speed_fraction * sim.target_speed[slot]
-            acceleration = 1.5 * (desired - speed)
-            # stop before a conflict zone while a car with priority has not cleared it
+            acceleration = SPEED_GAIN * (self.speed_fraction * sim.target_speed[slot] - speed)
+            patient = self._standing_s[slot] < PATIENCE_S
             for b, other in enumerate(idx.tolist()):
-                if not higher[a, b]:
+                if not (higher[a, b] and patient):
                     continue
-                zone_start = table.zone_start[sim.route[slot], sim.route[other]]
-                gap = zone_start - STOP_MARGIN_M - (sim.s[slot] + 0.5 * VEHICLE_LENGTH)
-                if gap < 0.0 and sim.s[slot] + 0.5 * VEHICLE_LENGTH > zone_start:
-                    continue  # already inside: better to clear it
-                braking = -speed * speed / (2.0 * max(gap, 0.5))
+                gap = zone_start[sim.route[slot], sim.route[other]] - STOP_MARGIN_M - s_front
+                if s_front > zone_start[sim.route[slot], sim.route[other]]:
+                    continue  # already in the zone: clear it
+                other_gap = zone_start[sim.route[other], sim.route[slot]] - (sim.s[other] + half)
+                if other_gap > YIELD_HORIZON_S * max(sim.speed[other], 1.0):
+                    continue  # the car with priority is far away
                 if gap < 3.0 * speed + 5.0:
-                    acceleration = min(acceleration, braking if gap > 0.5 else -MAX_ACCELERATION)
-            actions[a if False else slot] = (acceleration, steering)
+                    braking = -speed * speed / (2.0 * gap) if gap > 0.5 else -MAX_ACCELERATION
+                    acceleration = min(acceleration, braking)
+            actions[slot] = (acceleration, steering)
+        standing = sim.present & (sim.speed < 0.5)
+        self._standing_s[standing] += DT
+        self._standing_s[~standing] = 0.0
         np.clip(actions[:, 0], -MAX_ACCELERATION, MAX_ACCELERATION, out=actions[:, 0])
         np.clip(actions[:, 1], -MAX_STEERING, MAX_STEERING, out=actions[:, 1])
         return actions
