@@ -108,3 +108,14 @@ def test_render_command_bad_input(tmp_path, args, message):
     assert result.returncode == 2
     assert message in result.stderr
     assert "Traceback" not in result.stderr
+
+
+@pytest.mark.skipif(__import__("shutil").which("ffmpeg") is None, reason="MP4 output needs ffmpeg on PATH")
+def test_mp4_output(tmp_path):
+    out = tmp_path / "demo.mp4"
+    result = crossway("render", "--scenario", "easy", "--steps", "6", "--out", str(out), "--pixels-per-m", "2")
+    assert result.returncode == 0, result.stderr
+    probe = subprocess.run(["ffprobe", "-v", "error", "-count_frames", "-select_streams", "v:0",
+                            "-show_entries", "stream=nb_read_frames,codec_name", "-of", "csv=p=0", str(out)],
+                           capture_output=True, text=True)
+    assert probe.stdout.strip().split(",")[-1] == "6"
