@@ -95,6 +95,13 @@ class IntersectionParallelEnv(ParallelEnv):
         self._agent_slot = {}
         self.agents = []
         observations, infos = {}, {}
+        self._admit_started(result, observations, infos)
+        self._last_result = result
+        return observations, infos
+
+    def _admit_started(self, result, observations: dict, infos: dict) -> list[str]:
+        """Add the agents whose episode began in ``result``; returns their names."""
+        names = []
         for slot in np.flatnonzero(result.started).tolist():
             agent = self._name(slot)
             self._slot_agent[slot] = agent
@@ -102,8 +109,8 @@ class IntersectionParallelEnv(ParallelEnv):
             self.agents.append(agent)
             observations[agent] = self._observation(result, slot)
             infos[agent] = {"lane": self.sim.slot_names[slot]}
-        self._last_result = result
-        return observations, infos
+            names.append(agent)
+        return names
 
     def step(self, actions: dict[str, np.ndarray]):
         unknown = [agent for agent in actions if agent not in self._agent_slot]
@@ -143,16 +150,10 @@ class IntersectionParallelEnv(ParallelEnv):
             self.agents.remove(agent)
             self._slot_agent[self._agent_slot.pop(agent)] = None
         if not out_of_time:
-            for slot in np.flatnonzero(result.started).tolist():
-                agent = self._name(slot)
-                self._slot_agent[slot] = agent
-                self._agent_slot[agent] = slot
-                self.agents.append(agent)
-                observations[agent] = self._observation(result, slot)
+            for agent in self._admit_started(result, observations, infos):
                 rewards[agent] = 0.0
                 terminated[agent] = False
                 truncated[agent] = False
-                infos[agent] = {"lane": self.sim.slot_names[slot]}
         self._last_result = result
         return observations, rewards, terminated, truncated, infos
 

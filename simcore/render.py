@@ -20,6 +20,7 @@ import numpy as np
 
 from simcore.dynamics import box_corners
 from simcore.rightofway import Sign
+from simcore.scenario import road_regions
 from simcore.views import CHANNELS, VIEW_EXTENT_M, sign_line_polygon
 
 BACKGROUND = (0.13, 0.15, 0.13)
@@ -34,47 +35,31 @@ TEXT = (0.92, 0.92, 0.92)
 PANEL_SCALE = 2  # view pixels are drawn 2x2
 
 
+def _polygon(ctx: cairo.Context, points) -> None:
+    ctx.move_to(*points[0])
+    for p in points[1:]:
+        ctx.line_to(*p)
+    ctx.close_path()
+
+
 def _unit(angle_deg: float) -> tuple[float, float]:
     a = math.radians(angle_deg)
     return (math.cos(a), math.sin(a))
 
 
 def _draw_roads(ctx: cairo.Context, sim) -> None:
-    """Road surface: the junction square with curb fillets cut out, plus every arm."""
+    """Road surface (``scenario.road_regions``), then lane markings on the arms."""
     intersection = sim.intersection
     spec = intersection.spec
     half = intersection.half_size_m
-    hw = intersection.road_half_width_m
-    far = half + max(spec.approach_length_m, spec.exit_length_m) + 20.0
-    ctx.set_source_rgb(*ROAD)
-    ctx.rectangle(-half, -half, 2 * half, 2 * half)
-    ctx.fill()
-    arms = sorted(spec.branches, key=lambda b: b.angle_deg)
-    ctx.set_source_rgb(*BACKGROUND)
-    for a, b in zip(arms, arms[1:] + arms[:1]):
-        gap = (b.angle_deg - a.angle_deg) % 360.0
-        ua, ub = np.array(_unit(a.angle_deg)), np.array(_unit(b.angle_deg))
-        va, vb = np.array(_unit(a.angle_deg + 90.0)), np.array(_unit(b.angle_deg - 90.0))
-        if gap > 179.0:
-            pts = [half * ua + hw * va, half * ua + half * va, half * ub + half * vb, half * ub + hw * vb]
-            ctx.move_to(*pts[0])
-            for p in pts[1:]:
-                ctx.line_to(*p)
-            ctx.close_path()
-            ctx.fill()
-            continue
-        offset = hw + spec.corner_radius_m
-        center = np.linalg.solve(np.array([va, vb]), np.array([offset, offset]))
-        ctx.arc(center[0], center[1], spec.corner_radius_m, 0.0, 2.0 * math.pi)
-        ctx.fill()
-    ctx.set_source_rgb(*ROAD)
-    for branch in spec.branches:
-        u, n = np.array(_unit(branch.angle_deg)), np.array(_unit(branch.angle_deg + 90.0))
-        pts = [-hw * n, far * u - hw * n, far * u + hw * n, hw * n]
-        ctx.move_to(*pts[0])
-        for p in pts[1:]:
-            ctx.line_to(*p)
-        ctx.close_path()
+    far = half + max(spec.approach_length_m, spec.exit_length_m) + 20.0  # past the picture's edge
+    for region in road_regions(intersection, arm_length_m=far):
+        ctx.set_source_rgb(*(ROAD if region.is_road else BACKGROUND))
+        if region.radius > 0.0:
+            ctx.new_path()
+            ctx.arc(region.center[0], region.center[1], region.radius, 0.0, 2.0 * math.pi)
+        else:
+            _polygon(ctx, region.polygon)
         ctx.fill()
     # lane markings on the arms: solid centre line, dashed lines between lanes of one direction
     ctx.set_source_rgb(*MARKING)
@@ -111,10 +96,7 @@ def _draw_signs(ctx: cairo.Context, sim) -> None:
         pts = sign_line_polygon(sim.intersection, lane.index)
         if sign == Sign.STOP:
             ctx.set_source_rgb(*STOP_RED)
-            ctx.move_to(*pts[0])
-            for p in pts[1:]:
-                ctx.line_to(*p)
-            ctx.close_path()
+            _polygon(ctx, pts)
             ctx.fill()
         else:  # yield: a row of yellow triangles ("shark teeth") pointing at the arriving car
             a, b = np.array(pts[0]), np.array(pts[1])
@@ -125,10 +107,7 @@ def _draw_signs(ctx: cairo.Context, sim) -> None:
                 p0 = a + (b - a) * (t + 0.1) / teeth
                 p1 = a + (b - a) * (t + 0.9) / teeth
                 tip = a + (b - a) * (t + 0.5) / teeth + depth
-                ctx.move_to(*p0)
-                ctx.line_to(*p1)
-                ctx.line_to(*tip)
-                ctx.close_path()
+                _polygon(ctx, (p0, p1, tip))
                 ctx.fill()
 
 
@@ -139,10 +118,7 @@ def _draw_cars(ctx: cairo.Context, sim, learner_colour=LEARNER_GREEN) -> None:
     corners = box_corners(sim.x[idx], sim.y[idx], sim.heading[idx])
     for box in corners:
         ctx.set_source_rgb(*learner_colour)
-        ctx.move_to(*box[0])
-        for p in box[1:]:
-            ctx.line_to(*p)
-        ctx.close_path()
+        _polygon(ctx, box)
         ctx.fill_preserve()
         ctx.set_source_rgb(0.05, 0.25, 0.07)
         ctx.set_line_width(0.15)

@@ -252,6 +252,48 @@ class Intersection:
         return self.spec.branches
 
 
+@dataclass(frozen=True)
+class RoadRegion:
+    """A shape to paint, in order, to draw the road surface: a polygon or a disc [m]."""
+
+    is_road: bool  # True: road; False: cut back to off-road
+    polygon: tuple[tuple[float, float], ...] = ()
+    center: tuple[float, float] = (0.0, 0.0)
+    radius: float = 0.0  # > 0: a disc instead of the polygon
+
+
+def road_regions(intersection: "Intersection", arm_length_m: float | None = None) -> list[RoadRegion]:
+    """The road surface as painting steps: the junction square, curb fillets cut from its corners
+    (a straight curb where no arm lies between two arms), then every arm on top."""
+    spec = intersection.spec
+    half = intersection.half_size_m
+    hw = intersection.road_half_width_m
+    far = half + max(spec.approach_length_m, spec.exit_length_m) if arm_length_m is None else arm_length_m
+    regions = [RoadRegion(True, ((-half, -half), (half, -half), (half, half), (-half, half)))]
+    arms = sorted(spec.branches, key=lambda b: b.angle_deg)
+    for a, b in zip(arms, arms[1:] + arms[:1]):
+        gap = (b.angle_deg - a.angle_deg) % 360.0
+        ua, ub = _unit(a.angle_deg), _unit(b.angle_deg)
+        va, vb = _unit(a.angle_deg + 90.0), _unit(b.angle_deg - 90.0)  # each arm's side facing the gap
+        if gap > 179.0:
+            corners = [(half, hw, ua, va), (half, half, ua, va), (half, half, ub, vb), (half, hw, ub, vb)]
+            regions.append(RoadRegion(False, tuple(
+                (d * u[0] + o * v[0], d * u[1] + o * v[1]) for d, o, u, v in corners)))
+            continue
+        # the curb circle is tangent to both arms' edges: on the lines at distance hw + radius
+        offset = hw + spec.corner_radius_m
+        det = va[0] * vb[1] - va[1] * vb[0]
+        center = (offset * (vb[1] - va[1]) / det, offset * (va[0] - vb[0]) / det)
+        regions.append(RoadRegion(False, center=center, radius=spec.corner_radius_m))
+    for branch in spec.branches:
+        u, n = _unit(branch.angle_deg), _unit(branch.angle_deg + 90.0)
+        regions.append(RoadRegion(True, (
+            (-hw * n[0], -hw * n[1]), (far * u[0] - hw * n[0], far * u[1] - hw * n[1]),
+            (far * u[0] + hw * n[0], far * u[1] + hw * n[1]), (hw * n[0], hw * n[1]),
+        )))
+    return regions
+
+
 def classify_turn(entry_angle_deg: float, exit_angle_deg: float) -> str | None:
     """Turn from an arm at ``entry_angle_deg`` into the arm at ``exit_angle_deg`` (right-hand traffic)."""
     relative = (exit_angle_deg - entry_angle_deg) % 360.0

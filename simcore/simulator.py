@@ -20,7 +20,7 @@ One step (100 ms, paper "Training settings"):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -137,7 +137,6 @@ class Simulator:
         self.renderer = ViewRenderer(self.intersection, self.num_slots) if config.observe else None
         self._route_paths = [r.path for r in self.intersection.routes]
         self._route_length = np.array([r.path.length for r in self.intersection.routes])
-        self._lane_branch = np.array([lane.branch for lane in self.intersection.lanes])
         self._half_width = 0.5 * self.spec.lane_width_m
         self._rng = np.random.default_rng(seed)
         self._allocate()
@@ -409,8 +408,3 @@ class Simulator:
         fresh = idx[started]
         if len(fresh):
             history[fresh] = frames[started][:, :, None, :]
-
-    # -- helpers for tools ------------------------------------------------------------------------
-
-    def with_config(self, **changes) -> "Simulator":
-        return Simulator(self.spec, replace(self.config, **changes))

@@ -30,7 +30,7 @@ import numpy as np
 
 from simcore.dynamics import VEHICLE_LENGTH, VEHICLE_WIDTH, box_corners
 from simcore.rightofway import Sign
-from simcore.scenario import Intersection
+from simcore.scenario import Intersection, road_regions
 
 VIEW_SIZE_PX = 84  # [px] (paper, Fig. 3)
 VIEW_EXTENT_M = 50.0  # side of the square each agent sees [m] (paper, "Environment")
@@ -90,33 +90,17 @@ class WorldRaster:
 
 def draw_navigable(raster: WorldRaster, intersection: Intersection) -> None:
     """Road arms plus the junction square with curb fillets cut out of its corners."""
-    spec = intersection.spec
-    half = intersection.half_size_m
-    hw = intersection.road_half_width_m
     ctx = raster.context
-    raster.polygon([(-half, -half), (half, -half), (half, half), (-half, half)], ROAD)
-    arms = sorted(spec.branches, key=lambda b: b.angle_deg)
-    for a, b in zip(arms, arms[1:] + arms[:1]):
-        gap = (b.angle_deg - a.angle_deg) % 360.0
-        ua, ub = _unit(a.angle_deg), _unit(b.angle_deg)
-        va, vb = _unit(a.angle_deg + 90.0), _unit(b.angle_deg - 90.0)  # each arm's side facing the gap
-        if gap > 179.0:  # no arm in between: a straight curb along the through road
-            pts = [half * ua + hw * va, half * ua + half * va, half * ub + half * vb, half * ub + hw * vb]
-            raster.polygon([tuple(p) for p in pts], 0)
-            continue
-        # curb circle: tangent to both arms' edges, radius corner_radius
-        offset = hw + spec.corner_radius_m
-        m = np.array([va, vb])
-        center = np.linalg.solve(m, np.array([offset, offset]))
-        raster.value(0)
-        ctx.new_path()
-        ctx.arc(center[0], center[1], spec.corner_radius_m, 0.0, 2.0 * math.pi)
-        ctx.fill()
-    for branch in spec.branches:
-        u, n = _unit(branch.angle_deg), _unit(branch.angle_deg + 90.0)
-        far = half + max(spec.approach_length_m, spec.exit_length_m)
-        pts = [-hw * n, far * u - hw * n, far * u + hw * n, hw * n]
-        raster.polygon([tuple(p) for p in pts], ROAD)
+    # arms run on to the raster's edge, so a car at its start sees road behind it too
+    for region in road_regions(intersection, arm_length_m=2.0 * raster.half_extent_m):
+        code = ROAD if region.is_road else 0
+        if region.radius > 0.0:
+            raster.value(code)
+            ctx.new_path()
+            ctx.arc(region.center[0], region.center[1], region.radius, 0.0, 2.0 * math.pi)
+            ctx.fill()
+        else:
+            raster.polygon(region.polygon, code)
 
 
 def draw_route(raster: WorldRaster, intersection: Intersection, route_index: int, code: int = PATH) -> None:
