@@ -79,9 +79,11 @@ def test_history_holds_four_frames_oldest_first():
     sim = empty_simulator("medium")
     slot = place(sim, "south_0", "straight", s=10.0, speed=8.0)
     result = sim.step(still(sim))
-    first = result.views[slot, NAVIGABLE - 3:NAVIGABLE + 1].copy()
+    first = result.views[slot, PATH_CH].copy()
     for _ in range(3):
         result = sim.step(still(sim))
-    frames = result.views[slot, 0:4]
-    assert not np.array_equal(frames[0], frames[3])  # the car moved 2.4 m: the road slid down
-    assert np.array_equal(frames[0], first[3])  # the oldest kept frame is the one seen 3 steps ago
+    frames = result.views[slot, 4:8]  # path channel, oldest to newest
+    # the route starts 10 m behind the car; as the car drives on, that start slides down
+    assert not np.array_equal(frames[0], frames[3])
+    assert np.array_equal(frames[0], first)  # the oldest kept frame is the one seen 3 steps ago
+    assert (frames[3] == PATH).sum() < (frames[0] == PATH).sum()
