@@ -83,7 +83,7 @@ def test_history_holds_four_frames_oldest_first():
     for _ in range(3):
         result = sim.step(still(sim))
     frames = result.views[slot, 4:8]  # path channel, oldest to newest
-    # the route starts 10 m behind the car; as the car drives on, that start slides down
+    # the route starts 10 m behind the car; as the car drives on, that start slides down the view
     assert not np.array_equal(frames[0], frames[3])
     assert np.array_equal(frames[0], first)  # the oldest kept frame is the one seen 3 steps ago
-    assert (frames[3] == PATH).sum() < (frames[0] == PATH).sum()
+    assert (frames[3] == PATH).sum() > (frames[0] == PATH).sum()  # more route behind the car now
