@@ -44,14 +44,12 @@ CRASH_INTO_HIGHER_PRIORITY = -1.0
 
 
 def speed_reward(speed: np.ndarray, target_speed: np.ndarray) -> np.ndarray:
-    """r_speed = xi * speed / target_speed (paper, eq. r_speed), up to the target speed.
+    """r_speed = xi * speed / target_speed (paper, eq. r_speed).
 
-    The paper calls the target "the maximum velocity the vehicle should not exceed" but gives no
-    formula past it; we mirror the slope above the target so that speeding earns less, reaching
-    zero at twice the target (our choice, documented in docs/simulator.md).
+    The simulator caps every car's speed at its target speed, "the maximum velocity the vehicle
+    should not exceed" (paper, "Training settings"), so this lies in [0, xi].
     """
-    ratio = speed / target_speed
-    return XI * np.where(ratio <= 1.0, ratio, 2.0 - ratio)
+    return XI * (speed / target_speed)
 
 
 def localization_reward(heading_error: np.ndarray, distance: np.ndarray) -> np.ndarray:

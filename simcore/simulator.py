@@ -216,6 +216,9 @@ class Simulator:
             self.x[idx], self.y[idx], self.heading[idx], self.speed[idx] = bicycle_step(
                 self.x[idx], self.y[idx], self.heading[idx], self.speed[idx], actions[idx, 0], actions[idx, 1]
             )
+            # the target speed is "the maximum velocity the vehicle should not exceed" (paper,
+            # "Training settings"): the car's speed is capped there, so r_speed <= xi
+            np.minimum(self.speed[idx], self.target_speed[idx], out=self.speed[idx])
             self.steps[idx] += 1
             self.speed_sum[idx] += self.speed[idx]
         self.time_s += DT
