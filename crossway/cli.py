@@ -10,9 +10,9 @@ import argparse
 import sys
 
 from crossway import __version__
-from crossway.commands import bench, render
+from crossway.commands import bench, distributed, render
 
-COMMANDS = (render, bench)
+COMMANDS = (distributed, render, bench)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -11,6 +11,7 @@ crossway/<run>/weights/version  learner      tiny publication of the newest vers
 crossway/<run>/gradients        actors       ``GradientPush`` messages (put, congestion control BLOCK)
 crossway/<run>/hello/<actor>    actors       ``ActorHello`` heartbeats (put)
 crossway/<run>/actors/<actor>   actors       liveliness token: present while the actor lives
+crossway/<run>/status           learner      ``LearnerStatus`` about once a second
 ==============================  ===========  ===========================================================
 """
 
@@ -54,6 +55,10 @@ def actor_token(run: str, actor_id: str) -> str:
 
 def actor_tokens(run: str) -> str:
     return f"{ROOT}/{_check(run, 'run name')}/actors/*"
+
+
+def status(run: str) -> str:
+    return f"{ROOT}/{_check(run, 'run name')}/status"
 
 
 def actor_id_from_key(key: str) -> str:

@@ -153,7 +153,26 @@ class ActorHello(Message):
     episodes: int = 0
 
 
-MESSAGE_TYPES: dict[str, type[Message]] = {cls.TYPE: cls for cls in (Weights, GradientPush, ActorHello)}
+@dataclass(frozen=True)
+class LearnerStatus(Message):
+    """The learner's progress, published about once a second (progress lines, dashboards)."""
+
+    TYPE: ClassVar[str] = "status"
+    run_id: str
+    version: int
+    agent_steps: int  # behind every applied gradient
+    episodes: int
+    reach_rate: float  # goal fraction of the last episodes (0-1)
+    mean_speed_mps: float
+    agent_steps_per_s: float
+    sigma: float
+    live_actors: int
+    rejected: int  # messages refused since start, any reason
+
+
+MESSAGE_TYPES: dict[str, type[Message]] = {
+    cls.TYPE: cls for cls in (Weights, GradientPush, ActorHello, LearnerStatus)
+}
 
 _FIELD_KINDS = {
     "version": "int", "sigma": "float", "run_id": "str", "actor_id": "str", "base_version": "int",
@@ -161,7 +180,8 @@ _FIELD_KINDS = {
     "loss_value_acc": "float", "loss_value_sa": "float", "scenario": "str", "host": "str",
     "pid": "int", "episodes_count": "int", "lane": "str", "sign": "str", "end_reason": "str",
     "steps": "int", "mean_speed_mps": "float", "return_acc": "float", "return_sa": "float",
-    "turn": "str",
+    "turn": "str", "reach_rate": "float", "agent_steps_per_s": "float", "live_actors": "int",
+    "rejected": "int",
 }
 
 
@@ -215,7 +235,7 @@ def _build(cls: type, raw: dict[str, Any], where: str) -> Any:
                     raise DecodeError("schema", f"{where}.episodes[{i}]: expected a map")
                 episodes.append(_build(EpisodeStats, item, f"{where}.episodes[{i}]"))
             kwargs[f.name] = tuple(episodes)
-        elif f.name == "episodes":
+        elif f.name == "episodes":  # ActorHello and LearnerStatus count episodes
             kwargs[f.name] = _check_scalar("episodes_count", value, where)
         else:
             kwargs[f.name] = _check_scalar(f.name, value, where)

@@ -1,0 +1,253 @@
+"""Delayed A3C (paper, sections "Related works" and "Neural Network Architecture").
+
+Each agent begins its episode with a local copy of the newest global weights. Every
+``update_interval`` steps (and when the episode ends) it computes n-step returns and advantages
+for both reward streams, takes a gradient step on its local copy, and adds that gradient to its
+episode sum. When the episode ends the whole sum goes to the learner, tagged with the version
+of the weights the episode started from; the learner applies it to the global network.
+
+This module is pure computation: no transport, no processes. ``ActorCore`` runs one simulator
+with one ``EpisodeLearner`` per car on the road and hands back finished episodes' gradients.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from algo.policy import ACTION_SCALE, Policy, PolicyConfig, preprocess
+from simcore.simulator import Simulator, StepResult
+
+LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class DA3CConfig:
+    """Agent-side D-A3C settings (the paper gives none of these numbers; ours are documented)."""
+
+    gamma: float = 0.99  # discount factor of both reward streams
+    update_interval: int = 20  # steps between an agent's local updates (n of the n-step returns)
+    local_learning_rate: float = 1e-3  # SGD step on the agent's local copy
+    value_coef: float = 0.5  # weight of the value losses against the policy losses
+    max_grad_norm: float = 40.0  # clip each local gradient to this L2 norm
+
+
+# -- returns and losses (small pure functions, tested against hand-computed numbers) -------------
+
+
+def n_step_returns(rewards: torch.Tensor, bootstrap: torch.Tensor | float, gamma: float) -> torch.Tensor:
+    """R_t = r_t + gamma r_{t+1} + ... + gamma^(T-t) V(s_T) for t in [0, T) (paper, eq. A_t).
+
+    ``rewards`` [T]; ``bootstrap`` V(s_T), 0 when the episode terminated.
+    """
+    returns = torch.empty_like(rewards)
+    running = torch.as_tensor(bootstrap, dtype=rewards.dtype)
+    for t in range(rewards.shape[0] - 1, -1, -1):
+        running = rewards[t] + gamma * running
+        returns[t] = running
+    return returns
+
+
+def gaussian_log_prob(action: torch.Tensor, mu: torch.Tensor, sigma: float) -> torch.Tensor:
+    """log N(action | mu, sigma); its gradient in mu is (action - mu) / sigma^2 (paper, eq. 4)."""
+    return -((action - mu) ** 2) / (2.0 * sigma * sigma) - math.log(sigma) - LOG_SQRT_2PI
+
+
+@dataclass
+class StreamLoss:
+    policy: torch.Tensor
+    value: torch.Tensor
+    advantages: torch.Tensor
+
+
+def stream_loss(mu: torch.Tensor, values: torch.Tensor, actions: torch.Tensor, rewards: torch.Tensor,
+                bootstrap: float, gamma: float, sigma: float) -> StreamLoss:
+    """Policy and value loss of one stream over one segment (sums over its steps).
+
+    Minimising ``policy`` follows eq. (1) with A_t = R_t - v(s_t): the advantage is a constant
+    weight, so the gradient is -A_t (a_t - mu_t) / sigma^2 * grad mu_t.
+    """
+    returns = n_step_returns(rewards, bootstrap, gamma)
+    advantages = returns - values
+    policy = -(advantages.detach() * gaussian_log_prob(actions, mu, sigma)).sum()
+    value = 0.5 * (advantages ** 2).sum()
+    return StreamLoss(policy, value, advantages.detach())
+
+
+# -- one agent's episode ------------------------------------------------------------------------
+
+
+@dataclass
+class EpisodeLearner:
+    """An agent during one episode: local weights, the current segment and the gradient sum."""
+
+    policy: Policy
+    base_version: int
+    config: DA3CConfig
+    views: np.ndarray  # [update_interval + 1, 16, 84, 84] uint8: segment observations
+    scalars: np.ndarray  # [update_interval + 1, 2] float32
+    actions: np.ndarray  # [update_interval, 2] float32, normalised units, unclipped samples
+    rewards: np.ndarray  # [update_interval, 2] float32: R_acc, R_sa
+    length: int = 0  # steps stored in the current segment
+    grad_sum: dict[str, torch.Tensor] = field(default_factory=dict)
+    losses: np.ndarray = field(default_factory=lambda: np.zeros(4))  # policy acc, policy sa, value acc, value sa
+    updates: int = 0
+
+    def observe(self, views: np.ndarray, scalars: np.ndarray) -> None:
+        """The observation the next action is taken from."""
+        self.views[self.length] = views
+        self.scalars[self.length] = scalars
+
+    def record(self, action: np.ndarray, reward_acc: float, reward_sa: float) -> None:
+        self.actions[self.length] = action
+        self.rewards[self.length] = (reward_acc, reward_sa)
+        self.length += 1
+
+    def update(self, sigma: float, terminal: bool) -> None:
+        """Local D-A3C step over the stored segment; the next observation is at index ``length``."""
+        n = self.length
+        if n == 0:
+            return
+        cfg = self.config
+        views, scalars = preprocess(self.views[: n + 1], self.scalars[: n + 1])
+        outputs = self.policy(views, scalars)
+        mu_acc, v_acc, mu_sa, v_sa = outputs
+        boot_acc = 0.0 if terminal else float(v_acc[n].detach())
+        boot_sa = 0.0 if terminal else float(v_sa[n].detach())
+        actions = torch.from_numpy(self.actions[:n])
+        rewards = torch.from_numpy(self.rewards[:n])
+        acc = stream_loss(mu_acc[:n], v_acc[:n], actions[:, 0], rewards[:, 0], boot_acc, cfg.gamma, sigma)
+        sa = stream_loss(mu_sa[:n], v_sa[:n], actions[:, 1], rewards[:, 1], boot_sa, cfg.gamma, sigma)
+        loss = acc.policy + sa.policy + cfg.value_coef * (acc.value + sa.value)
+        self.policy.zero_grad(set_to_none=False)
+        loss.backward()
+        params = list(self.policy.parameters())
+        torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
+        with torch.no_grad():
+            for (name, p) in self.policy.named_parameters():
+                self.grad_sum[name].add_(p.grad)
+                p.add_(p.grad, alpha=-cfg.local_learning_rate)
+        self.losses += [float(acc.policy.detach()), float(sa.policy.detach()), float(acc.value.detach()), float(sa.value.detach())]
+        self.updates += 1
+        # the last observation opens the next segment
+        self.views[0] = self.views[n]
+        self.scalars[0] = self.scalars[n]
+        self.length = 0
+
+
+@dataclass
+class FinishedEpisode:
+    """What an actor sends for one episode: the gradient sum and the episode's statistics."""
+
+    base_version: int
+    gradients: dict[str, np.ndarray]
+    agent_steps: int
+    summary: object  # simcore.simulator.EpisodeSummary
+    mean_losses: np.ndarray  # policy acc, policy sa, value acc, value sa per update
+
+
+class ActorCore:
+    """One simulator, every car a learner with its own local weights (transport-free)."""
+
+    def __init__(self, sim: Simulator, policy_config: PolicyConfig = PolicyConfig(),
+                 config: DA3CConfig = DA3CConfig(), seed: int | None = None):
+        self.sim = sim
+        self.config = config
+        self.policy_config = policy_config
+        self.global_policy = Policy(policy_config)
+        self.version = -1  # no weights yet
+        self.sigma = 0.65
+        self._rng = np.random.default_rng(seed)
+        self._learners: list[EpisodeLearner | None] = [None] * sim.num_slots
+        self._spare: list[EpisodeLearner] = []
+        self._result: StepResult | None = None
+        self.agent_steps = 0
+
+    # weights ------------------------------------------------------------------------------------
+
+    def set_weights(self, version: int, sigma: float, tensors: dict[str, np.ndarray]) -> None:
+        """New global weights: episodes that start from now on copy them."""
+        with torch.no_grad():
+            for name, p in self.global_policy.named_parameters():
+                p.copy_(torch.from_numpy(tensors[name]))
+        self.version = version
+        self.sigma = sigma
+
+    def _new_learner(self) -> EpisodeLearner:
+        if self._spare:
+            learner = self._spare.pop()
+            learner.policy.load_state_dict(self.global_policy.state_dict())
+        else:
+            policy = Policy(self.policy_config)
+            policy.load_state_dict(self.global_policy.state_dict())
+            n = self.config.update_interval
+            learner = EpisodeLearner(
+                policy=policy, base_version=self.version, config=self.config,
+                views=np.zeros((n + 1, 16, 84, 84), np.uint8), scalars=np.zeros((n + 1, 2), np.float32),
+                actions=np.zeros((n, 2), np.float32), rewards=np.zeros((n, 2), np.float32),
+            )
+        learner.base_version = self.version
+        learner.length = 0
+        learner.updates = 0
+        learner.losses[:] = 0.0
+        learner.grad_sum = {name: torch.zeros_like(p) for name, p in learner.policy.named_parameters()}
+        return learner
+
+    # stepping -----------------------------------------------------------------------------------
+
+    def reset(self, seed: int | None = None) -> None:
+        if self.version < 0:
+            raise RuntimeError("ActorCore needs weights (set_weights) before it can act")
+        self._learners = [None] * self.sim.num_slots
+        self._result = self.sim.reset(seed=seed)
+        self._admit(self._result)
+
+    def _admit(self, result: StepResult) -> None:
+        for slot in np.flatnonzero(result.started).tolist():
+            learner = self._new_learner()
+            learner.observe(result.views[slot], result.scalars[slot])
+            self._learners[slot] = learner
+
+    def act(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sample actions for every car on the road: (normalised samples, simulator actions)."""
+        samples = np.zeros((self.sim.num_slots, 2), np.float32)
+        for slot, learner in enumerate(self._learners):
+            if learner is None:
+                continue
+            views, scalars = preprocess(learner.views[learner.length][None], learner.scalars[learner.length][None])
+            with torch.no_grad():
+                mu_acc, _, mu_sa, _ = learner.policy(views, scalars)
+            mean = np.array([float(mu_acc[0]), float(mu_sa[0])], np.float32)
+            samples[slot] = mean + self.sigma * self._rng.standard_normal(2).astype(np.float32)
+        env_actions = np.clip(samples, -1.0, 1.0) * ACTION_SCALE
+        return samples, env_actions
+
+    def step(self) -> list[FinishedEpisode]:
+        """One simulator step for every agent, local updates where due; returns ended episodes."""
+        samples, env_actions = self.act()
+        result = self.sim.step(env_actions)
+        finished: list[FinishedEpisode] = []
+        summaries = {e.slot: e for e in result.episodes}
+        for slot in np.flatnonzero(result.acted).tolist():
+            learner = self._learners[slot]
+            learner.record(samples[slot], result.reward_acc[slot], result.reward_sa[slot])
+            self.agent_steps += 1
+            ended = bool(result.terminated[slot] or result.truncated[slot])
+            learner.observe(result.views[slot], result.scalars[slot])
+            if ended or learner.length >= self.config.update_interval:
+                learner.update(self.sigma, terminal=bool(result.terminated[slot]))
+            if ended:
+                finished.append(self._finish(slot, learner, summaries[slot]))
+        self._admit(result)
+        self._result = result
+        return finished
+
+    def _finish(self, slot: int, learner: EpisodeLearner, summary) -> FinishedEpisode:
+        self._learners[slot] = None
+        gradients = {name: g.numpy().copy() for name, g in learner.grad_sum.items()}
+        self._spare.append(learner)
+        return FinishedEpisode(learner.base_version, gradients, summary.steps, summary,
+                               learner.losses / max(learner.updates, 1))

@@ -1,0 +1,277 @@
+"""``crossway learner``, ``crossway actor`` and ``crossway train``.
+
+The learner owns the global network; actors host a simulator each and connect to it over Zenoh.
+``train`` starts both on this machine (learner on a loopback endpoint, actors connected to it),
+shows a live progress line and stops cleanly on Ctrl-C or when its time is up.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import multiprocessing
+import os
+import signal
+import socket
+import sys
+import time
+from pathlib import Path
+
+CURRICULA = ("none", "single")
+
+
+def _add_common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--run-name", default="default",
+                        help="namespace of this run's Zenoh keys; learner and actors must agree")
+    parser.add_argument("--mode", choices=("peer", "client"), default="peer",
+                        help="Zenoh session mode (client: through a router)")
+
+
+def _add_learner_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--learning-rate", type=float, default=2.5e-4, help="Adam step size of the global network")
+    parser.add_argument("--sigma-decay-steps", type=int, default=5_000_000,
+                        help="agent-steps over which the exploration sigma falls from 0.65 to 0.05")
+    parser.add_argument("--max-staleness", type=int, default=50,
+                        help="refuse gradients computed on weights more than this many versions old")
+    parser.add_argument("--checkpoint-interval", type=float, default=60.0, metavar="SECONDS",
+                        help="seconds between checkpoints (one is also written on exit)")
+    parser.add_argument("--metrics-port", type=int, default=9100, help="Prometheus /metrics port (0: off)")
+
+
+def _add_actor_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenario", default="easy", help="built-in scenario (easy, medium, hard) or a TOML path")
+    parser.add_argument("--delay-max", type=float, default=None, metavar="SECONDS",
+                        help="longest wait between an agent's episodes [s]; default: the scenario's")
+    parser.add_argument("--update-interval", type=int, default=20,
+                        help="steps between an agent's local D-A3C updates")
+
+
+def add_parser(subparsers) -> None:
+    fmt = argparse.ArgumentDefaultsHelpFormatter
+    learner = subparsers.add_parser(
+        "learner", help="run the central D-A3C learner", formatter_class=fmt,
+        description="Own the global network and its optimizer, apply actors' whole-episode gradients as "
+                    "they arrive, publish new weights, serve Prometheus metrics, write checkpoints (and "
+                    "resume from the newest one in --run-dir).")
+    learner.add_argument("--run-dir", required=True, type=Path, help="directory for checkpoints")
+    learner.add_argument("--listen", default="tcp/0.0.0.0:7447",
+                         help="comma-separated Zenoh endpoints to listen on")
+    learner.add_argument("--connect", default="", help="comma-separated endpoints to connect to (e.g. a router)")
+    _add_common(learner)
+    _add_learner_options(learner)
+    learner.set_defaults(func=run_learner_command)
+
+    actor = subparsers.add_parser(
+        "actor", help="run one actor (a simulator and its agents)", formatter_class=fmt,
+        description="Host one simulator with a learning agent on every entry lane; pull the newest "
+                    "global weights over Zenoh and push each finished episode's gradient sum to the "
+                    "learner. Stateless: stop it at any time, start more to go faster.")
+    actor.add_argument("--connect", default="tcp/127.0.0.1:7447",
+                       help="comma-separated Zenoh endpoints of the learner or a router")
+    actor.add_argument("--id", default="", help="actor id (default: HOST-PID)")
+    actor.add_argument("--seed", type=int, default=None, help="random seed (default: random)")
+    actor.add_argument("--lanes", default="", help="comma-separated entry lanes that host agents (default: all)")
+    _add_common(actor)
+    _add_actor_options(actor)
+    actor.set_defaults(func=run_actor_command)
+
+    train = subparsers.add_parser(
+        "train", help="train on this machine: a learner and N actors", formatter_class=fmt,
+        description="Start a learner and N actor processes on this machine, connected over Zenoh on "
+                    "loopback; show a live progress line; stop after --minutes or on Ctrl-C, leaving a "
+                    "checkpoint in --run-dir. Running it again with the same --run-dir resumes.")
+    train.add_argument("--actors", type=int, default=max(1, (os.cpu_count() or 2) - 1),
+                       help="actor processes (each uses one core)")
+    train.add_argument("--minutes", type=float, default=30.0, help="wall-clock budget [min]")
+    train.add_argument("--run-dir", type=Path, default=Path("runs/default"), help="checkpoints and progress.csv")
+    train.add_argument("--curriculum", choices=CURRICULA, default="none",
+                       help="single: one agent per simulator and no traffic (path following only); "
+                            "actor i drives from entry lane i")
+    train.add_argument("--seed", type=int, default=0, help="actor i uses seed + i")
+    train.add_argument("--port", type=int, default=0, help="loopback TCP port of the learner (0: a free one)")
+    _add_common(train)
+    _add_learner_options(train)
+    _add_actor_options(train)
+    train.set_defaults(func=run_train_command)
+
+
+# -- configs from arguments ------------------------------------------------------------------------
+
+
+def learner_config(args, listen: tuple[str, ...], connect: tuple[str, ...]):
+    from learner.core import LearnerConfig
+    from learner.service import LearnerServiceConfig
+    from protocol.transport import TransportConfig
+
+    if args.learning_rate <= 0 or args.sigma_decay_steps < 0 or args.max_staleness < 0:
+        raise ValueError("--learning-rate must be > 0, --sigma-decay-steps and --max-staleness >= 0")
+    if args.metrics_port < 0 or args.metrics_port > 65535:
+        raise ValueError(f"--metrics-port must be 0-65535, got {args.metrics_port}")
+    return LearnerServiceConfig(
+        run_dir=args.run_dir, run_name=args.run_name,
+        transport=TransportConfig(mode=args.mode, listen=listen, connect=connect),
+        metrics_port=args.metrics_port, checkpoint_interval_s=args.checkpoint_interval,
+        learner=LearnerConfig(learning_rate=args.learning_rate, sigma_decay_agent_steps=args.sigma_decay_steps,
+                              max_staleness=args.max_staleness),
+    )
+
+
+def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, seed, actor_id: str,
+                 delay_max: float | None):
+    from actors.worker import ActorServiceConfig
+    from algo.d_a3c import DA3CConfig
+    from protocol.transport import TransportConfig
+    from simcore.scenario import load_scenario
+    from simcore.simulator import SimConfig
+
+    load_scenario(args.scenario)  # fail here, with the scenario's own message
+    if args.update_interval < 1:
+        raise ValueError(f"--update-interval must be >= 1, got {args.update_interval}")
+    sim = SimConfig(lanes=lanes, delay_max_s=delay_max, delay_min_s=0.0 if delay_max is not None else None)
+    return ActorServiceConfig(
+        scenario=args.scenario, run_name=args.run_name,
+        transport=TransportConfig(mode=args.mode, connect=connect), actor_id=actor_id, seed=seed, sim=sim,
+        da3c=DA3CConfig(update_interval=args.update_interval),
+    )
+
+
+def run_learner_command(args) -> int:
+    from learner.service import run_learner
+    from protocol.transport import parse_endpoints
+
+    return run_learner(learner_config(args, parse_endpoints(args.listen), parse_endpoints(args.connect)))
+
+
+def run_actor_command(args) -> int:
+    from actors.worker import run_actor
+    from protocol.transport import parse_endpoints
+
+    lanes = tuple(x for x in args.lanes.split(",") if x) or None
+    return run_actor(actor_config(args, parse_endpoints(args.connect), lanes, args.seed, args.id, args.delay_max))
+
+
+# -- local launcher ------------------------------------------------------------------------------
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _child_learner(config) -> None:
+    from learner.service import run_learner
+
+    sys.exit(run_learner(config))
+
+
+def _child_actor(config) -> None:
+    from actors.worker import run_actor
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the launcher stops actors with SIGTERM
+    sys.exit(run_actor(config))
+
+
+def run_train_command(args) -> int:
+    import zenoh
+
+    from protocol import keys
+    from protocol.messages import DecodeError, LearnerStatus, decode
+    from protocol.transport import TransportConfig, open_session
+    from simcore.scenario import build_intersection, load_scenario
+
+    if args.actors < 1:
+        raise ValueError(f"--actors must be >= 1, got {args.actors}")
+    if not args.minutes > 0:
+        raise ValueError(f"--minutes must be > 0, got {args.minutes}")
+    port = args.port or _free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    args.run_dir.mkdir(parents=True, exist_ok=True)
+    lane_names = [lane.name for lane in build_intersection(load_scenario(args.scenario)).lanes]
+    delay_max = args.delay_max
+    if args.curriculum == "single" and delay_max is None:
+        delay_max = 0.0  # alone on the road: no reason to wait
+    learner_cfg = learner_config(args, (endpoint,), ())
+    actor_cfgs = []
+    for i in range(args.actors):
+        lanes = (lane_names[i % len(lane_names)],) if args.curriculum == "single" else None
+        actor_cfgs.append(actor_config(args, (endpoint,), lanes, args.seed + i, f"local-{i}", delay_max))
+
+    context = multiprocessing.get_context("spawn")  # Zenoh sessions do not survive fork
+    learner = context.Process(target=_child_learner, args=(learner_cfg,), name="crossway-learner")
+    learner.start()
+    actors = [context.Process(target=_child_actor, args=(cfg,), name=f"crossway-actor-{i}")
+              for i, cfg in enumerate(actor_cfgs)]
+    for process in actors:
+        process.start()
+    print(f"train: learner on {endpoint}, {args.actors} actor(s) on {args.scenario}"
+          f"{' (single-agent curriculum)' if args.curriculum == 'single' else ''}, run dir {args.run_dir}",
+          file=sys.stderr)
+    if args.metrics_port:
+        print(f"train: Prometheus metrics at http://127.0.0.1:{args.metrics_port}/metrics", file=sys.stderr)
+
+    interrupted = False
+
+    def on_sigint(*_):
+        nonlocal interrupted
+        interrupted = True
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    progress_path = args.run_dir / "progress.csv"
+    new_file = not progress_path.exists()
+    started = time.monotonic()
+    deadline = started + args.minutes * 60.0
+    latest: LearnerStatus | None = None
+    interactive = sys.stderr.isatty()
+    last_line = 0.0
+    with open(progress_path, "a", newline="") as handle, \
+            open_session(TransportConfig(connect=(endpoint,))) as session:
+        writer = csv.writer(handle)
+        if new_file:
+            writer.writerow(["wall_s", "version", "agent_steps", "episodes", "reach_rate", "mean_speed_mps",
+                             "agent_steps_per_s", "sigma", "live_actors", "rejected"])
+        subscriber = session.declare_subscriber(keys.status(args.run_name), zenoh.handlers.RingChannel(16))
+        while not interrupted and time.monotonic() < deadline and learner.is_alive():
+            sample = subscriber.try_recv()  # the newest status; the ring keeps the last few
+            if sample is None:
+                time.sleep(0.2)
+                continue
+            try:
+                status = decode(sample.payload.to_bytes(), expect=LearnerStatus)
+            except DecodeError:
+                continue
+            latest = status
+            elapsed = time.monotonic() - started
+            writer.writerow([round(elapsed, 1), status.version, status.agent_steps, status.episodes,
+                             round(status.reach_rate, 4), round(status.mean_speed_mps, 3),
+                             round(status.agent_steps_per_s, 1), round(status.sigma, 4), status.live_actors,
+                             status.rejected])
+            handle.flush()
+            line = (f"train {int(elapsed // 60):02d}:{int(elapsed % 60):02d}  v{status.version}  "
+                    f"{status.agent_steps:,} agent-steps ({status.agent_steps_per_s:,.0f}/s)  "
+                    f"{status.episodes:,} episodes  reach {status.reach_rate:6.1%}  "
+                    f"speed {status.mean_speed_mps:4.1f} m/s  sigma {status.sigma:.3f}  "
+                    f"actors {status.live_actors}/{args.actors}")
+            if interactive:
+                print("\r" + line, end="", file=sys.stderr, flush=True)
+            elif time.monotonic() - last_line >= 10.0:
+                print(line, file=sys.stderr, flush=True)
+                last_line = time.monotonic()
+        subscriber.undeclare()
+    if interactive:
+        print(file=sys.stderr)
+    signal.signal(signal.SIGINT, previous)
+    reason = "interrupted" if interrupted else ("learner exited" if not learner.is_alive() else "time is up")
+    print(f"train: {reason}; stopping actors, then the learner (it writes a checkpoint)", file=sys.stderr)
+    for process in actors:
+        if process.is_alive():
+            process.terminate()
+    for process in actors:
+        process.join(timeout=30)
+    if learner.is_alive():
+        learner.terminate()
+    learner.join(timeout=120)
+    if latest is not None:
+        print(f"train: version {latest.version}, {latest.agent_steps:,} agent-steps, {latest.episodes:,} "
+              f"episodes, reach rate {latest.reach_rate:.1%} over the last episodes; progress in {progress_path}")
+    return 0 if learner.exitcode == 0 else 1

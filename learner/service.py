@@ -1,0 +1,269 @@
+"""The learner process: Zenoh in and out, checkpoints, metrics, around ``LearnerCore``.
+
+Wiring (one comment per connection):
+
+- gradients key -> bounded queue (Zenoh callback thread; full queue: drop and count)
+- queue -> decode and validate -> staleness check -> ``LearnerCore.apply`` (main thread)
+- main thread -> weights key: publication at most every ``publish_interval_s`` when changed
+- weights key queryable -> main thread replies with the newest weights (actors ask on start)
+- actors' liveliness tokens -> live-actor gauge
+- main thread -> status key, about once a second (``crossway train``'s progress line)
+- main thread -> run_dir/checkpoints, every ``checkpoint_interval_s`` and on SIGTERM/SIGINT
+- metrics registry -> HTTP /metrics on ``metrics_port``
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import re
+import signal
+import sys
+import threading
+import time
+import uuid
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+import zenoh
+
+from learner.core import LearnerConfig, LearnerCore, StaleGradient
+from learner.metrics import LearnerMetrics
+from protocol import keys
+from protocol.messages import (
+    MAX_MESSAGE_BYTES,
+    DecodeError,
+    GradientPush,
+    LearnerStatus,
+    Weights,
+    check_shapes,
+    decode,
+    encode,
+)
+from protocol.transport import TransportConfig, open_session
+
+CHECKPOINT_PATTERN = re.compile(r"^ckpt-(\d{9})\.pt$")
+KEEP_CHECKPOINTS = 3
+
+
+@dataclass(frozen=True)
+class LearnerServiceConfig:
+    run_dir: Path
+    run_name: str = "default"  # key-expression namespace shared with the actors
+    transport: TransportConfig = field(default_factory=lambda: TransportConfig(listen=("tcp/0.0.0.0:7447",)))
+    metrics_port: int = 9100  # 0: no metrics server
+    metrics_address: str = "0.0.0.0"
+    checkpoint_interval_s: float = 60.0
+    publish_interval_s: float = 0.5  # shortest interval between weight publications
+    status_interval_s: float = 1.0
+    queue_size: int = 64  # pushes waiting to be applied; more are dropped and counted
+    max_message_bytes: int = MAX_MESSAGE_BYTES
+    learner: LearnerConfig = LearnerConfig()
+    max_updates: int = 0  # stop after this many updates (0: run until signalled)
+    torch_threads: int = 1
+
+
+def newest_checkpoint(run_dir: Path) -> Path | None:
+    directory = run_dir / "checkpoints"
+    if not directory.is_dir():
+        return None
+    found = sorted((int(m.group(1)), p) for p in directory.iterdir() if (m := CHECKPOINT_PATTERN.match(p.name)))
+    return found[-1][1] if found else None
+
+
+def write_checkpoint(run_dir: Path, core: LearnerCore, run_id: str) -> Path:
+    """Atomic: write to a temporary file, fsync, rename; keep the newest few."""
+    directory = run_dir / "checkpoints"
+    directory.mkdir(parents=True, exist_ok=True)
+    final = directory / f"ckpt-{core.version:09d}.pt"
+    temporary = directory / f".{final.name}.{os.getpid()}.tmp"
+    state = core.state_dict()
+    state["run_id"] = run_id
+    with open(temporary, "wb") as handle:
+        torch.save(state, handle)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(temporary, final)
+    old = sorted(p for p in directory.iterdir() if CHECKPOINT_PATTERN.match(p.name))
+    for path in old[:-KEEP_CHECKPOINTS]:
+        path.unlink(missing_ok=True)
+    return final
+
+
+class LearnerService:
+    def __init__(self, config: LearnerServiceConfig, log=print):
+        self.config = config
+        self.log = log
+        torch.set_num_threads(config.torch_threads)
+        self.core = LearnerCore(config.learner)
+        self.metrics = LearnerMetrics()
+        self.run_id = uuid.uuid4().hex[:12]
+        config.run_dir.mkdir(parents=True, exist_ok=True)
+        checkpoint = newest_checkpoint(config.run_dir)
+        if checkpoint is not None:
+            state = torch.load(checkpoint, weights_only=False)
+            self.core.load_state_dict(state)
+            self.run_id = state.get("run_id", self.run_id)
+            self.log(f"learner: resumed from {checkpoint} at version {self.core.version}")
+        self._queue: queue.Queue[bytes] = queue.Queue(maxsize=config.queue_size)
+        self._stop = threading.Event()
+        self._live_actors: set[str] = set()
+        self._episodes = 0
+        self._rejected = 0
+        self._rate_window: deque[tuple[float, int]] = deque()
+        self._published_version = -1
+        self._last_publish = 0.0
+        self._weights_cache: tuple[int, bytes] | None = None
+        self.session: zenoh.Session | None = None
+
+    # -- Zenoh callbacks (Zenoh's threads: never block, never call Zenoh) --------------------------
+
+    def _on_gradient(self, sample: zenoh.Sample) -> None:
+        payload = sample.payload.to_bytes()
+        try:
+            self._queue.put_nowait(payload)
+        except queue.Full:
+            self.metrics.dropped.inc()
+
+    def _on_liveliness(self, sample: zenoh.Sample) -> None:
+        actor = keys.actor_id_from_key(str(sample.key_expr))
+        if sample.kind == zenoh.SampleKind.PUT:
+            self._live_actors.add(actor)
+        else:
+            self._live_actors.discard(actor)
+        self.metrics.live_actors.set(len(self._live_actors))
+
+    # -- main thread ------------------------------------------------------------------------------
+
+    def stop(self, *_args) -> None:
+        self._stop.set()
+
+    def weights_payload(self) -> bytes:
+        """Encoded newest weights, encoded once per version."""
+        if self._weights_cache is None or self._weights_cache[0] != self.core.version:
+            message = Weights(version=self.core.version, sigma=self.core.sigma,
+                              tensors=self.core.weights(), run_id=self.run_id)
+            self._weights_cache = (self.core.version, encode(message))
+        return self._weights_cache[1]
+
+    def handle_push(self, payload: bytes) -> bool:
+        """Validate and apply one push; every refusal is counted by reason. True if applied."""
+        try:
+            push = decode(payload, expect=GradientPush, max_bytes=self.config.max_message_bytes)
+            check_shapes(push.tensors, self.core.shapes, "gradient")
+            staleness = self.core.staleness(push.base_version)
+            self.core.apply(push.tensors, push.base_version, push.agent_steps)
+        except DecodeError as error:
+            self._reject(error.reason, str(error))
+            return False
+        except StaleGradient as error:
+            self._reject("stale", str(error))
+            return False
+        self.metrics.staleness.observe(staleness)
+        self.metrics.updates.inc()
+        self.metrics.agent_steps.inc(push.agent_steps)
+        self.metrics.version.set(self.core.version)
+        self.metrics.sigma.set(self.core.sigma)
+        for head, value in zip(("policy_acc", "policy_sa", "value_acc", "value_sa"),
+                               (push.loss_policy_acc, push.loss_policy_sa, push.loss_value_acc, push.loss_value_sa)):
+            self.metrics.loss.labels(head).set(value)
+        for episode in push.episodes:
+            self._episodes += 1
+            self.metrics.record_episode(episode.scenario, episode.sign, episode.end_reason, episode.mean_speed_mps)
+        now = time.monotonic()
+        self._rate_window.append((now, push.agent_steps))
+        while self._rate_window and now - self._rate_window[0][0] > 10.0:
+            self._rate_window.popleft()
+        return True
+
+    def _reject(self, reason: str, detail: str) -> None:
+        self._rejected += 1
+        self.metrics.rejected.labels(reason).inc()
+        if self._rejected <= 10 or self._rejected % 1000 == 0:
+            self.log(f"learner: rejected a message ({detail[:200]}); {self._rejected} so far")
+
+    def agent_steps_per_s(self) -> float:
+        if len(self._rate_window) < 2:
+            return 0.0
+        span = max(self._rate_window[-1][0] - self._rate_window[0][0], 1.0)
+        return sum(steps for _, steps in self._rate_window) / span
+
+    def status(self) -> LearnerStatus:
+        return LearnerStatus(
+            run_id=self.run_id, version=self.core.version, agent_steps=self.core.agent_steps,
+            episodes=self._episodes, reach_rate=self.metrics.rolling_reach_rate,
+            mean_speed_mps=self.metrics.rolling_mean_speed, agent_steps_per_s=self.agent_steps_per_s(),
+            sigma=self.core.sigma, live_actors=len(self._live_actors), rejected=self._rejected,
+        )
+
+    def checkpoint(self) -> Path:
+        path = write_checkpoint(self.config.run_dir, self.core, self.run_id)
+        self.metrics.checkpoints.inc()
+        return path
+
+    def run(self) -> int:
+        cfg = self.config
+        run = cfg.run_name
+        if cfg.metrics_port:
+            self.metrics.serve(cfg.metrics_port, cfg.metrics_address)
+            self.log(f"learner: metrics on http://{cfg.metrics_address}:{cfg.metrics_port}/metrics")
+        self.metrics.version.set(self.core.version)
+        self.metrics.sigma.set(self.core.sigma)
+        with open_session(cfg.transport) as session:
+            self.session = session
+            block = zenoh.CongestionControl.BLOCK
+            weights_publisher = session.declare_publisher(keys.weights(run), congestion_control=block)
+            status_publisher = session.declare_publisher(keys.status(run))
+            queryable = session.declare_queryable(keys.weights(run), zenoh.handlers.FifoChannel(256))
+            subscriber = session.declare_subscriber(keys.gradients(run), self._on_gradient)
+            liveliness = session.liveliness().declare_subscriber(keys.actor_tokens(run), self._on_liveliness,
+                                                                 history=True)
+            self.log(f"learner: run {run!r} at version {self.core.version}, listening on "
+                     f"{list(cfg.transport.listen) or list(cfg.transport.connect)}")
+            last_checkpoint = last_status = time.monotonic()
+            try:
+                while not self._stop.is_set():
+                    try:
+                        payload = self._queue.get(timeout=0.05)
+                    except queue.Empty:
+                        payload = None
+                    if payload is not None:
+                        self.handle_push(payload)
+                    self.metrics.queue_depth.set(self._queue.qsize())
+                    now = time.monotonic()
+                    while (query := queryable.try_recv()) is not None:
+                        query.reply(keys.weights(run), self.weights_payload(), congestion_control=block)
+                        query.drop()
+                    if self.core.version != self._published_version and now - self._last_publish >= cfg.publish_interval_s:
+                        weights_publisher.put(self.weights_payload())
+                        self._published_version = self.core.version
+                        self._last_publish = now
+                    if now - last_status >= cfg.status_interval_s:
+                        self.metrics.agent_steps_rate.set(self.agent_steps_per_s())
+                        status_publisher.put(encode(self.status()))
+                        last_status = now
+                    if now - last_checkpoint >= cfg.checkpoint_interval_s:
+                        self.checkpoint()
+                        last_checkpoint = now
+                    if cfg.max_updates and self.core.version >= cfg.max_updates:
+                        break
+            finally:
+                path = self.checkpoint()
+                self.log(f"learner: stopped at version {self.core.version}; checkpoint {path}")
+                for entity in (subscriber, liveliness, queryable, weights_publisher, status_publisher):
+                    entity.undeclare()
+        return 0
+
+
+def run_learner(config: LearnerServiceConfig) -> int:
+    """Process entry point: SIGTERM and SIGINT stop the loop and leave a checkpoint."""
+    service = LearnerService(config, log=lambda text: print(text, file=sys.stderr, flush=True))
+    signal.signal(signal.SIGTERM, service.stop)
+    signal.signal(signal.SIGINT, service.stop)
+    return service.run()
+
+
+__all__ = ["LearnerService", "LearnerServiceConfig", "newest_checkpoint", "run_learner",
+           "write_checkpoint"]
