@@ -112,6 +112,8 @@ class LearnerService:
         self._live_actors: set[str] = set()
         self._episodes = 0
         self._rejected = 0
+        self.pushes_by_actor: dict[str, int] = {}  # applied pushes per actor id (tests, logs)
+        self.newest_base_version = -1  # newest weights version an applied push started from
         self._rate_window: deque[tuple[float, int]] = deque()
         self._published_version = -1
         self._last_publish = 0.0
@@ -162,6 +164,8 @@ class LearnerService:
             self._reject("stale", str(error))
             return False
         self.metrics.staleness.observe(staleness)
+        self.pushes_by_actor[push.actor_id] = self.pushes_by_actor.get(push.actor_id, 0) + 1
+        self.newest_base_version = max(self.newest_base_version, push.base_version)
         self.metrics.updates.inc()
         self.metrics.agent_steps.inc(push.agent_steps)
         self.metrics.version.set(self.core.version)
@@ -234,7 +238,7 @@ class LearnerService:
                     self.metrics.queue_depth.set(self._queue.qsize())
                     now = time.monotonic()
                     while (query := queryable.try_recv()) is not None:
-                        query.reply(keys.weights(run), self.weights_payload(), congestion_control=block)
+                        query.reply(keys.weights(run), self.weights_payload())
                         query.drop()
                     if self.core.version != self._published_version and now - self._last_publish >= cfg.publish_interval_s:
                         weights_publisher.put(self.weights_payload())
