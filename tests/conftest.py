@@ -50,6 +50,28 @@ def still(sim: Simulator) -> np.ndarray:
     return np.zeros((sim.num_slots, 2))
 
 
-@pytest.fixture
-def medium_road():
+@pytest.fixture(scope="session")
+def _medium_road_simulator():
     return empty_simulator("medium")
+
+
+@pytest.fixture
+def medium_road(_medium_road_simulator):
+    """An empty medium junction (no car on the road, no start due); built once, reset per test."""
+    sim = _medium_road_simulator
+    sim.reset(seed=0)
+    assert not sim.present.any()
+    return sim
+
+
+def view_pixel(sim: Simulator, ego: int, x: float, y: float) -> tuple[int, int]:
+    """(row, column) of the world point ``(x, y)`` [m] in slot ``ego``'s 84x84 view
+    (ego at the centre, heading up, 50 m across)."""
+    import math
+
+    dx, dy = x - sim.x[ego], y - sim.y[ego]
+    h = sim.heading[ego]
+    forward = dx * math.cos(h) + dy * math.sin(h)
+    left = -dx * math.sin(h) + dy * math.cos(h)
+    metres_per_px = 50.0 / 84.0
+    return int(math.floor(42 - forward / metres_per_px)), int(math.floor(42 - left / metres_per_px))

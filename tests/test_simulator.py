@@ -7,7 +7,7 @@ import pytest
 
 from conftest import empty_simulator, place, still
 from simcore.controller import ScriptedDriver
-from simcore.dynamics import MAX_STEERING
+from simcore.dynamics import MAX_STEERING, WHEELBASE
 from simcore.rewards import EndReason
 from simcore.simulator import SimConfig, Simulator
 
@@ -25,6 +25,32 @@ def test_off_path_ends_the_episode_with_the_steering_penalty(medium_road):
     assert result.reward_sa[slot] < -0.95  # r_terminal_sa = -1
     assert result.reward_acc[slot] > 0.0  # r_terminal_acc = 0: only r_speed
     assert not sim.present[slot]
+
+
+def test_a_car_placed_outside_its_lane_is_off_path(medium_road):
+    sim = medium_road
+    slot = place(sim, "south_0", "straight", s=10.0, r=-1.80, speed=0.0)  # 5 cm past the lane edge
+    inside = place(sim, "north_0", "straight", s=10.0, r=1.70, speed=0.0)  # 5 cm inside it
+    result = sim.step(still(sim))
+    assert result.end_reason[slot] == EndReason.OFF_PATH and result.terminated[slot]
+    assert result.reward_sa[slot] == pytest.approx(0.05 - 0.05 * 1.80 - 1.0, abs=1e-5)
+    assert result.reward_acc[slot] == 0.0  # standing still, r_terminal_acc = 0
+    assert result.end_reason[inside] == EndReason.RUNNING and not result.terminated[inside]
+    assert result.episodes[0].end_reason == "off_path" and result.episodes[0].lane == "south_0"
+
+
+def test_crashed_cars_end_together_and_are_seen_one_last_time(medium_road):
+    sim = medium_road
+    south = place(sim, "south_0", "straight", s=57.0, sign=2, speed=5.0)
+    # the east car overlaps the south car and is also 1.8 m off its lane: crash takes precedence
+    east = place(sim, "east_0", "straight", s=55.75, r=1.8, sign=0, speed=5.0)
+    result = sim.step(still(sim))
+    assert result.end_reason[south] == EndReason.CRASH and result.end_reason[east] == EndReason.CRASH
+    assert result.terminated[[south, east]].all() and not result.truncated.any()
+    assert result.observed[[south, east]].all()  # the final views are rendered
+    assert not sim.present[[south, east]].any()
+    result = sim.step(still(sim))
+    assert not result.acted.any() and not result.observed.any()
 
 
 def test_wrong_way_heading_is_off_path(medium_road):
@@ -59,27 +85,60 @@ def test_bad_actions_get_clear_messages(medium_road):
         sim.step(np.zeros((3, 2)))
     with pytest.raises(ValueError, match=r"shape"):
         sim.step(np.zeros(8))
-    for bad in (np.nan, np.inf):
+    with pytest.raises(ValueError, match=r"got shape \(4, 3\)"):
+        sim.step(np.zeros((4, 3)))
+    x_before = sim.x[slot]
+    for column, bad in ((1, np.nan), (1, np.inf), (0, -np.inf)):
         actions = still(sim)
-        actions[slot, 1] = bad
-        with pytest.raises(ValueError, match="finite.*west_0"):
+        actions[slot, column] = bad
+        with pytest.raises(ValueError, match="finite.*lanes.*west_0"):
             sim.step(actions)
+    assert sim.x[slot] == x_before and sim.time_s == 0.0  # a refused step changes nothing
     # NaN in a row without a car is ignored: nothing drives there
     actions = still(sim)
     actions[sim.slot_names.index("north_0")] = np.nan
     sim.step(actions)
 
 
-def test_out_of_range_actions_are_clipped():
+@pytest.mark.parametrize("given, clipped", [
+    ((50.0, 5.0), (3.0, MAX_STEERING)),
+    ((-50.0, -5.0), (-3.0, -MAX_STEERING)),
+    ((1.0, 0.5), (1.0, MAX_STEERING)),
+])
+def test_out_of_range_actions_are_clipped(medium_road, given, clipped):
+    sim = medium_road
     results = []
-    for steering, acceleration in ((5.0, 50.0), (MAX_STEERING, 3.0)):
-        sim = empty_simulator("medium")
+    for action in (given, clipped):
+        sim.reset(seed=0)
         slot = place(sim, "south_0", "straight", s=5.0, speed=5.0)
         actions = still(sim)
-        actions[slot] = (acceleration, steering)
+        actions[slot] = action
         sim.step(actions)
         results.append((sim.x[slot], sim.y[slot], sim.heading[slot], sim.speed[slot]))
-    assert results[0] == pytest.approx(results[1])
+    assert results[0] == pytest.approx(results[1], abs=1e-12)
+    # and the clipped action is what moved the car: speed and yaw follow the bicycle model
+    beta = math.atan(0.5 * math.tan(clipped[1]))
+    assert results[0][3] == pytest.approx(5.0 + 0.1 * clipped[0])
+    assert results[0][2] - math.pi / 2 == pytest.approx(5.0 * math.sin(beta) / (0.5 * WHEELBASE) * 0.1)
+    np.testing.assert_array_equal(sim.validate_actions(np.tile(given, (sim.num_slots, 1)))[0], clipped)
+
+
+def test_a_new_episode_starts_at_the_route_start_with_the_papers_speeds():
+    sim = Simulator("hard", SimConfig(observe=False), seed=4)
+    result = sim.reset()
+    assert result.started.all() and sim.present.all() and (sim.episode_count == 1).all()
+    assert len(set(sim.branch_signs.tolist())) > 1  # never every arm the same
+    for slot, lane_index in enumerate(sim.slot_lanes):
+        lane = sim.intersection.lanes[lane_index]
+        assert sim.route[slot] in lane.routes
+        path = sim.intersection.routes[sim.route[slot]].path
+        assert (sim.x[slot], sim.y[slot]) == pytest.approx(path.position(0.0, 0.0))
+        assert sim.heading[slot] == pytest.approx(path.heading_at(0.0))
+        assert (sim.s[slot], sim.r[slot], sim.steps[slot]) == (0.0, 0.0, 0)
+        assert 3.0 <= sim.speed[slot] <= 6.0 and 7.0 <= sim.target_speed[slot] <= 10.0  # paper's ranges
+        assert sim.sign[slot] == sim.branch_signs[lane.branch]  # both lanes of an arm share its sign
+    assert np.array_equal(result.scalars[:, 0], sim.speed.astype(np.float32))
+    assert np.array_equal(result.scalars[:, 1], sim.target_speed.astype(np.float32))
 
 
 def test_one_agent_per_lane_and_random_waits():
@@ -140,14 +199,21 @@ def run(seed, steps=200):
     sim = Simulator("medium", SimConfig(delay_max_s=5.0), seed=seed)
     sim.reset()
     driver = ScriptedDriver(sim)
+    episodes = []
     for _ in range(steps):
         result = sim.step(driver.act())
-    return np.concatenate([sim.x, sim.y, sim.speed]), result.views.copy()
+        episodes += [(e.lane, e.turn, e.sign, e.end_reason, e.steps) for e in result.episodes]
+    state = np.concatenate([sim.x, sim.y, sim.heading, sim.speed, sim.target_speed, sim.route, sim.sign,
+                            sim.present, sim.episode_count, sim.return_acc, sim.return_sa])
+    return state, result.views.copy(), episodes
 
 
 def test_same_seed_same_run_different_seed_different_run():
-    state_a, views_a = run(5)
-    state_b, views_b = run(5)
-    state_c, _ = run(6)
+    state_a, views_a, episodes_a = run(5)
+    state_b, views_b, episodes_b = run(5)
+    state_c, _, episodes_c = run(6)
+    assert len(episodes_a) > 0  # cars did finish within 20 s
     assert np.array_equal(state_a, state_b) and np.array_equal(views_a, views_b)
+    assert episodes_a == episodes_b
     assert not np.array_equal(state_a, state_c)
+    assert episodes_a != episodes_c
