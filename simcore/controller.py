@@ -21,6 +21,7 @@ from simcore.simulator import Simulator
 STOP_MARGIN_M = 2.0  # stop this far before a conflict zone [m]
 YIELD_HORIZON_S = 5.0  # yield to a car with priority that reaches the conflict within this time [s]
 PATIENCE_S = 4.0  # after standing this long, go [s]
+FOLLOW_GAP_M = 4.0  # bumper-to-bumper gap kept behind a car on a shared lane [m]
 SPEED_GAIN = 1.5  # proportional speed control [1/s]
 
 
@@ -42,6 +43,7 @@ class ScriptedDriver:
             return actions
         higher = sim.priorities(idx) if self.yield_to_priority else np.zeros((len(idx),) * 2, bool)
         zone_start = sim.priority.zone_start
+        merge_at = sim.priority.merge_at
         half = 0.5 * VEHICLE_LENGTH
         for a, slot in enumerate(idx.tolist()):
             path = sim.intersection.routes[sim.route[slot]].path
@@ -56,6 +58,14 @@ class ScriptedDriver:
             patient = self._standing_s[slot] < PATIENCE_S
             for b, other in enumerate(idx.tolist()):
                 if not (higher[a, b] and patient):
+                    continue
+                merge_ego = merge_at[sim.route[slot], sim.route[other]]
+                if not math.isnan(merge_ego) and sim.s[other] >= merge_at[sim.route[other], sim.route[slot]]:
+                    # the other car is already on the lane both routes share: follow it, do not stop
+                    ahead = (sim.s[other] - merge_at[sim.route[other], sim.route[slot]]) - (sim.s[slot] - merge_ego)
+                    gap = ahead - VEHICLE_LENGTH - FOLLOW_GAP_M
+                    if gap < 2.0 * speed:
+                        acceleration = min(acceleration, SPEED_GAIN * (sim.speed[other] - speed) + 0.5 * gap)
                     continue
                 gap = zone_start[sim.route[slot], sim.route[other]] - STOP_MARGIN_M - s_front
                 if s_front > zone_start[sim.route[slot], sim.route[other]]:

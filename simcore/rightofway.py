@@ -90,7 +90,10 @@ class PriorityTable:
 def build_priority_table(intersection: Intersection) -> PriorityTable:
     routes = intersection.routes
     count = len(routes)
-    samples = [r.path.sample(SAMPLE_STEP) for r in routes]
+    samples = [r.path.sample(SAMPLE_STEP)[:, :2] for r in routes]
+    s_values = [np.linspace(0.0, r.path.length, len(p)) for r, p in zip(routes, samples)]
+    low = [p.min(axis=0) - CONFLICT_DISTANCE for p in samples]
+    high = [p.max(axis=0) + CONFLICT_DISTANCE for p in samples]
     conflict = np.zeros((count, count), dtype=bool)
     zone_start = np.full((count, count), np.inf)
     zone_end = np.full((count, count), -np.inf)
@@ -99,31 +102,35 @@ def build_priority_table(intersection: Intersection) -> PriorityTable:
     lanes = intersection.lanes
     branches = intersection.branches
     for i in range(count):
-        for j in range(count):
-            if i == j or routes[i].entry_lane == routes[j].entry_lane:
+        for j in range(i + 1, count):
+            if routes[i].entry_lane == routes[j].entry_lane:
                 continue
-            pi, pj = samples[i][:, :2], samples[j][:, :2]
-            # distance from each sample of i to the nearest sample of j
-            d = np.sqrt(((pi[:, None, :] - pj[None, :, :]) ** 2).sum(-1)).min(axis=1)
-            close = d < CONFLICT_DISTANCE
-            if not close.any():
-                continue
-            conflict[i, j] = True
-            s_values = np.linspace(0.0, routes[i].path.length, len(pi))
-            zone_start[i, j] = s_values[close].min()
-            zone_end[i, j] = s_values[close].max()
-            joined = d < MERGE_DISTANCE
-            if joined[-1]:
-                # first index from which the routes stay joined to the end
-                first = len(joined) - int(np.argmin(joined[::-1])) if not joined.all() else 0
-                merge_at[i, j] = s_values[first]
-                # the merge zone ends once the vehicle is a length into the shared lane
-                zone_end[i, j] = merge_at[i, j] + VEHICLE_LENGTH
-            lane_i, lane_j = lanes[routes[i].entry_lane], lanes[routes[j].entry_lane]
-            right_wins[i, j] = _right_wins(
-                branches[lane_i.branch].angle_deg, branches[lane_j.branch].angle_deg,
-                routes[i].turn, routes[j].turn, lane_i.branch, lane_j.branch, lane_i.lane, lane_j.lane,
-            )
+            if (low[i] > high[j]).any() or (low[j] > high[i]).any():
+                continue  # bounding boxes apart: no conflict possible
+            # squared distances as |p|^2 + |q|^2 - 2 p.q: one matrix product instead of a 3-D array
+            pi, pj = samples[i], samples[j]
+            squared = (pi * pi).sum(1)[:, None] + (pj * pj).sum(1)[None, :] - 2.0 * (pi @ pj.T)
+            np.maximum(squared, 0.0, out=squared)
+            # each direction: distance from every sample of one route to the nearest of the other
+            for a, b, d in ((i, j, np.sqrt(squared.min(axis=1))), (j, i, np.sqrt(squared.min(axis=0)))):
+                close = d < CONFLICT_DISTANCE
+                if not close.any():
+                    continue
+                conflict[a, b] = True
+                zone_start[a, b] = s_values[a][close].min()
+                zone_end[a, b] = s_values[a][close].max()
+                joined = d < MERGE_DISTANCE
+                if joined[-1]:
+                    # first index from which the routes stay joined to the end
+                    first = len(joined) - int(np.argmin(joined[::-1])) if not joined.all() else 0
+                    merge_at[a, b] = s_values[a][first]
+                    # the merge zone ends once the vehicle is a length into the shared lane
+                    zone_end[a, b] = merge_at[a, b] + VEHICLE_LENGTH
+                lane_a, lane_b = lanes[routes[a].entry_lane], lanes[routes[b].entry_lane]
+                right_wins[a, b] = _right_wins(
+                    branches[lane_a.branch].angle_deg, branches[lane_b.branch].angle_deg,
+                    routes[a].turn, routes[b].turn, lane_a.branch, lane_b.branch, lane_a.lane, lane_b.lane,
+                )
     return PriorityTable(conflict, zone_end, zone_start, merge_at, right_wins)
 
 

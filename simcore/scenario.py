@@ -14,6 +14,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path as FilePath
 from typing import Any
 
+from simcore.dynamics import MAX_STEERING, turning_radius
 from simcore.geometry import Path, fillet_path
 
 SCENARIO_DIR = FilePath(__file__).parent / "scenarios"
@@ -112,6 +113,13 @@ def parse_scenario(data: dict[str, Any], source: str = "<mapping>") -> ScenarioS
         lanes = 1
     lane_width = _number(data.get("lane_width_m", 3.5), "lane_width_m", problems, 2.0)
     corner = _number(data.get("corner_radius_m", 14.0), "corner_radius_m", problems, 0.0, strictly=True)
+    smallest_radius = turning_radius(MAX_STEERING)
+    if corner > 0.0 and lane_width >= 2.0 and corner + 0.5 * lane_width < smallest_radius:
+        problems.append(
+            f"corner_radius_m: right turns follow an arc of corner_radius_m + lane_width_m / 2 = "
+            f"{corner + 0.5 * lane_width:g} m, tighter than the {smallest_radius:.1f} m a car can turn "
+            f"at {MAX_STEERING} rad; use at least {smallest_radius - 0.5 * lane_width:.1f}"
+        )
     approach = _number(data.get("approach_length_m", 40.0), "approach_length_m", problems, 10.0)
     exit_length = _number(data.get("exit_length_m", 30.0), "exit_length_m", problems, 10.0)
 

@@ -218,7 +218,7 @@ class Simulator:
             )
             # the target speed is "the maximum velocity the vehicle should not exceed" (paper,
             # "Training settings"): the car's speed is capped there, so r_speed <= xi
-            np.minimum(self.speed[idx], self.target_speed[idx], out=self.speed[idx])
+            self.speed[idx] = np.minimum(self.speed[idx], self.target_speed[idx])
             self.steps[idx] += 1
             self.speed_sum[idx] += self.speed[idx]
         self.time_s += DT

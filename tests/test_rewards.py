@@ -14,12 +14,6 @@ from simcore.rewards import (
 from simcore.rightofway import Sign
 
 
-SPEED_CAP_BUG = pytest.mark.xfail(strict=True, reason=(
-    "simcore/simulator.py Simulator.step: np.minimum(self.speed[idx], self.target_speed[idx], "
-    "out=self.speed[idx]) writes into the copy that fancy indexing returns, so the speed is never "
-    "capped at the target; fix: self.speed[idx] = np.minimum(self.speed[idx], self.target_speed[idx])"))
-
-
 @pytest.mark.parametrize("reason, into_higher, expected", [
     (EndReason.GOAL, False, (1.0, 1.0)),
     (EndReason.OFF_PATH, False, (0.0, -1.0)),
@@ -51,7 +45,6 @@ def test_speed_reward_is_xi_times_speed_ratio():
     assert speed_reward(np.array(0.0), np.array(8.0)) == 0.0
 
 
-@SPEED_CAP_BUG
 def test_cars_never_exceed_their_target_speed(medium_road):
     sim = medium_road
     slot = place(sim, "south_0", "straight", s=5.0, speed=7.9, target_speed=8.0)
@@ -100,7 +93,6 @@ def test_simulator_penalises_an_offset(medium_road):
     assert result.reward_sa[slot] == pytest.approx(0.05 - 0.05 * 1.0, abs=1e-6)
 
 
-@SPEED_CAP_BUG
 def test_a_car_above_its_target_speed_is_capped(medium_road):
     sim = medium_road
     slot = place(sim, "south_0", "straight", s=10.0, speed=12.0, target_speed=8.0)

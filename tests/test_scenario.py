@@ -233,10 +233,6 @@ def test_missing_file_is_named(tmp_path):
         load_scenario("medium2")
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "simcore.scenario.parse_scenario does not check corner_radius_m against the bicycle model's "
-    "smallest turning radius (13.4 m at 0.2 rad), which ScenarioSpec's comment says it must "
-    "exceed: a 5 m corner gives 6.75 m right-turn arcs no car can follow"))
 def test_a_corner_too_tight_to_drive_is_refused(tmp_path):
     file = tmp_path / "tight.toml"
     file.write_text(GOOD.replace("lanes_per_direction = 1", "corner_radius_m = 5.0"))

@@ -1,0 +1,159 @@
+"""Learner and actors over real Zenoh sessions on loopback (multicast scouting off, explicit
+endpoints): weights out, gradients in, actors dying, the learner restarting, the CLI."""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from learner.service import LearnerService, LearnerServiceConfig
+from protocol import keys
+from protocol.messages import LearnerStatus, decode
+from protocol.transport import TransportConfig, open_session
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def start_actor(endpoint: str, actor_id: str, *extra) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "crossway", "actor", "--connect", endpoint, "--id", actor_id,
+         "--scenario", "easy", "--delay-max", "0.5", "--update-interval", "10", "--seed", "1", *extra],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )
+
+
+def wait_for(predicate, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+@pytest.fixture
+def learner(tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    service = LearnerService(LearnerServiceConfig(
+        run_dir=tmp_path, transport=TransportConfig(listen=(endpoint,)), metrics_port=0,
+        checkpoint_interval_s=3600, publish_interval_s=0.2), log=lambda _: None)
+    thread = threading.Thread(target=service.run, daemon=True)
+    thread.start()
+    yield service, endpoint, thread
+    service.stop()
+    thread.join(timeout=30)
+
+
+def stop(process: subprocess.Popen) -> None:
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            process.kill()
+
+
+def test_learner_and_two_actors_exchange_weights_and_gradients(learner):
+    service, endpoint, _ = learner
+    actors = [start_actor(endpoint, f"actor-{i}") for i in range(2)]
+    try:
+        wait_for(lambda: len(service._live_actors) == 2, 60, "two liveliness tokens")
+        wait_for(lambda: len(service.pushes_by_actor) == 2 and service.core.version >= 12, 120,
+                 "pushes from both actors")
+        # actors picked up newer weights: later pushes started from versions above 0
+        wait_for(lambda: service.newest_base_version > 0, 60, "a push computed on published weights")
+        assert service._rejected == 0
+        assert service.metrics.rolling_mean_speed > 0.0
+    finally:
+        for process in actors:
+            stop(process)
+    wait_for(lambda: len(service._live_actors) == 0, 30, "liveliness tokens to go")
+
+
+def test_an_actor_killed_mid_episode_leaves_the_learner_running(learner):
+    service, endpoint, thread = learner
+    survivor, victim = start_actor(endpoint, "survivor"), start_actor(endpoint, "victim")
+    try:
+        wait_for(lambda: service.pushes_by_actor.get("victim", 0) >= 2, 120, "the victim's pushes")
+        victim.send_signal(signal.SIGKILL)
+        victim.wait(timeout=10)
+        wait_for(lambda: "victim" not in service._live_actors, 30, "the victim's token to go")
+        version = service.core.version
+        wait_for(lambda: service.core.version >= version + 5, 120, "updates after the kill")
+        assert thread.is_alive()
+        assert service.pushes_by_actor.get("survivor", 0) > 0
+    finally:
+        stop(survivor)
+        stop(victim)
+
+
+def learner_process(run_dir: Path, endpoint: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "crossway", "learner", "--run-dir", str(run_dir), "--listen", endpoint,
+         "--metrics-port", "0", "--checkpoint-interval", "3600"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )
+
+
+def test_a_restarted_learner_resumes_its_version_and_actors_rejoin(tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    statuses: list[LearnerStatus] = []
+    with open_session(TransportConfig(connect=(endpoint,))) as session:
+        session.declare_subscriber(keys.status("default"),
+                                   lambda sample: statuses.append(decode(sample.payload.to_bytes())))
+        first = learner_process(tmp_path, endpoint)
+        actor = start_actor(endpoint, "steady")
+        try:
+            wait_for(lambda: statuses and statuses[-1].version >= 8, 120, "updates before the restart")
+            first.send_signal(signal.SIGTERM)
+            _, log = first.communicate(timeout=60)
+            assert first.returncode == 0, log
+            stopped_at = int(log.rsplit("stopped at version ", 1)[1].split(";")[0])
+            assert stopped_at >= 8
+            assert list((tmp_path / "checkpoints").glob("ckpt-*.pt"))
+            statuses.clear()
+            second = learner_process(tmp_path, endpoint)
+            try:
+                wait_for(lambda: statuses and statuses[-1].version >= stopped_at + 5, 120,
+                         "the same actor's updates after the restart")
+                assert min(s.version for s in statuses) >= stopped_at  # the count went on
+                assert actor.poll() is None  # the actor rode out the restart
+            finally:
+                second.send_signal(signal.SIGTERM)
+                _, log = second.communicate(timeout=60)
+            assert f"resumed from" in log and f"at version {stopped_at}" in log
+        finally:
+            stop(actor)
+            stop(first)
+
+
+def test_train_command_smoke(tmp_path):
+    run_dir = tmp_path / "run"
+    result = subprocess.run(
+        [sys.executable, "-m", "crossway", "train", "--scenario", "easy", "--actors", "1", "--minutes", "0.4",
+         "--run-dir", str(run_dir), "--metrics-port", "0", "--delay-max", "0.5"],
+        capture_output=True, text=True, timeout=180,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "time is up" in result.stderr
+    rows = (run_dir / "progress.csv").read_text().splitlines()
+    assert rows[0].startswith("wall_s,version,agent_steps")
+    assert len(rows) >= 3
+    assert list((run_dir / "checkpoints").glob("ckpt-*.pt"))
+
+
+def test_train_rejects_bad_arguments(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "crossway", "train", "--actors", "0", "--run-dir", str(tmp_path)],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "--actors" in result.stderr
