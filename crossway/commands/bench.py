@@ -47,6 +47,42 @@ def add_parser(subparsers) -> None:
                      help="print only the JSON object (default also prints it; the flag silences progress)")
     sim.set_defaults(func=run_sim)
 
+    actor = benches.add_parser(
+        "actor",
+        help="one actor's agent-steps per second with D-A3C, against the bare network rate",
+        description=(
+            "Run one actor's loop without transport (simulator, every agent acting with its own "
+            "local weights, local D-A3C updates every --update-interval steps) with every lane busy, "
+            "and compare its agent-steps per second with the same network's bare forward+backward "
+            "rate on the same batch (one update segment). Pinned to one core, one torch thread."
+        ),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    actor.add_argument("--scenario", default="hard", help="built-in scenario or a TOML path")
+    actor.add_argument("--seconds", type=float, default=20.0, help="wall-clock time to measure [s]")
+    actor.add_argument("--update-interval", type=int, default=20, help="steps between local updates")
+    actor.add_argument("--seed", type=int, default=0, help="random seed")
+    actor.add_argument("--no-pin", action="store_true", help="do not pin the process to one CPU core")
+    actor.add_argument("--json", action="store_true", help="print only the JSON object")
+    actor.set_defaults(func=run_actor_bench)
+
+    learner = benches.add_parser(
+        "learner",
+        help="gradient pushes applied per second from synthetic pushes over Zenoh",
+        description=(
+            "Start a learner (this process, one torch thread, pinned to one core) and a pusher process "
+            "that sends pre-encoded synthetic gradient pushes over Zenoh on loopback as fast as it can; "
+            "report pushes applied per second, pushes dropped by the bounded queue, and the learner "
+            "process's resident memory at the start and the end."
+        ),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    learner.add_argument("--seconds", type=float, default=20.0, help="wall-clock time to measure [s]")
+    learner.add_argument("--queue-size", type=int, default=64, help="learner's bounded push queue")
+    learner.add_argument("--no-pin", action="store_true", help="do not pin the learner to one CPU core")
+    learner.add_argument("--json", action="store_true", help="print only the JSON object")
+    learner.set_defaults(func=run_learner_bench)
+
 
 def pin_to_one_core() -> int | None:
     """Pin this process to the first CPU it may use; returns that CPU or None if unsupported."""
@@ -113,6 +149,143 @@ def run_sim(args) -> int:
         "peak_rss_bytes": peak_rss_bytes(),
         "python": platform.python_version(),
         "numpy": np.__version__,
+    }
+    print(json.dumps(report))
+    return 0
+
+
+def current_rss_bytes() -> int:
+    with open("/proc/self/statm") as handle:
+        return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def run_actor_bench(args) -> int:
+    import torch
+
+    from algo.d_a3c import ActorCore, DA3CConfig
+    from algo.policy import Policy, preprocess
+    from learner.core import LearnerCore
+    from simcore.simulator import SimConfig, Simulator
+
+    if not args.seconds > 0 or args.update_interval < 1:
+        raise ValueError("--seconds must be > 0 and --update-interval >= 1")
+    cpu = None if args.no_pin else pin_to_one_core()
+    torch.set_num_threads(1)
+    sim = Simulator(args.scenario, SimConfig(delay_min_s=0.0, delay_max_s=0.0), seed=args.seed)
+    core = ActorCore(sim, config=DA3CConfig(update_interval=args.update_interval), seed=args.seed)
+    core.set_weights(0, 0.65, LearnerCore().weights())
+    core.reset()
+    for _ in range(3 * args.update_interval):  # warm-up: every agent has updated once
+        core.step()
+    steps_before = core.agent_steps
+    started = time.perf_counter()
+    while time.perf_counter() - started < args.seconds:
+        core.step()
+    elapsed = time.perf_counter() - started
+    actor_rate = (core.agent_steps - steps_before) / elapsed
+
+    # the bare rate: forward and backward of the same network on one update segment
+    policy = Policy()
+    batch = args.update_interval + 1
+    views, scalars = preprocess(np.random.randint(0, 256, (batch, 16, 84, 84), dtype=np.uint8),
+                                np.full((batch, 2), 8.0, np.float32))
+    samples = 0
+    started = time.perf_counter()
+    while time.perf_counter() - started < min(args.seconds, 10.0):
+        policy.zero_grad()
+        sum(out.sum() for out in policy(views, scalars)).backward()
+        samples += batch
+    bare_rate = samples / (time.perf_counter() - started)
+    report = {
+        "bench": "actor", "scenario": sim.spec.name, "lanes": sim.num_slots,
+        "agent_steps_per_s": round(actor_rate, 1),
+        "bare_forward_backward_samples_per_s": round(bare_rate, 1),
+        "ratio_to_bare": round(actor_rate / bare_rate, 3),
+        "update_interval": args.update_interval, "batch": batch,
+        "parameters": sum(p.numel() for p in policy.parameters()),
+        "cpu_pinned": cpu, "torch_threads": torch.get_num_threads(),
+        "peak_rss_bytes": peak_rss_bytes(), "torch": torch.__version__,
+    }
+    print(json.dumps(report))
+    return 0
+
+
+def _pusher(endpoint: str, run_name: str, payload: bytes, stop_after_s: float) -> None:
+    """Child process: put the same valid push as fast as Zenoh takes it."""
+    import zenoh
+
+    from protocol import keys
+    from protocol.transport import TransportConfig, open_session
+
+    with open_session(TransportConfig(connect=(endpoint,))) as session:
+        publisher = session.declare_publisher(keys.gradients(run_name),
+                                              congestion_control=zenoh.CongestionControl.DROP)
+        time.sleep(1.0)
+        deadline = time.monotonic() + stop_after_s
+        while time.monotonic() < deadline:
+            publisher.put(payload)
+
+
+def run_learner_bench(args) -> int:
+    import multiprocessing
+    import tempfile
+    import threading
+    from pathlib import Path
+
+    import torch
+
+    from learner.core import LearnerConfig
+    from learner.service import LearnerService, LearnerServiceConfig
+    from protocol.messages import EpisodeStats, GradientPush, encode
+    from protocol.transport import TransportConfig
+
+    if not args.seconds > 0 or args.queue_size < 1:
+        raise ValueError("--seconds must be > 0 and --queue-size >= 1")
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
+    run_dir = Path(tempfile.mkdtemp(prefix="crossway-bench-"))
+    service = LearnerService(LearnerServiceConfig(
+        run_dir=run_dir, transport=TransportConfig(listen=(endpoint,)), metrics_port=0,
+        checkpoint_interval_s=1e9, queue_size=args.queue_size,
+        learner=LearnerConfig(max_staleness=10**9)), log=lambda _: None)
+    torch.set_num_threads(1)
+    gradients = {name: (np.random.standard_normal(shape) * 1e-3).astype(np.float32)
+                 for name, shape in service.core.shapes.items()}
+    stats = EpisodeStats("easy", "south_0", "none", "goal", 100, 8.0, 1.0, 1.0, "left")
+    payload = encode(GradientPush(actor_id="bench", base_version=0, agent_steps=100, tensors=gradients,
+                                  episodes=(stats,)))
+    thread = threading.Thread(target=service.run, daemon=True)
+    thread.start()
+    context = multiprocessing.get_context("spawn")
+    pusher = context.Process(target=_pusher, args=(endpoint, "default", payload, args.seconds + 5.0))
+    pusher.start()  # before pinning: the pusher keeps every core this process was allowed
+    cpu = None if args.no_pin else pin_to_one_core()
+    # wait for the first push, then measure
+    deadline = time.monotonic() + 30.0
+    while service.core.version == 0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    rss_start = current_rss_bytes()
+    version_start, started = service.core.version, time.perf_counter()
+    samples = []
+    while time.perf_counter() - started < args.seconds:
+        time.sleep(0.5)
+        samples.append(current_rss_bytes())
+    applied = service.core.version - version_start
+    elapsed = time.perf_counter() - started
+    service.stop()
+    thread.join(timeout=30)
+    pusher.terminate()
+    pusher.join(timeout=10)
+    report = {
+        "bench": "learner", "pushes_applied_per_s": round(applied / elapsed, 1),
+        "push_bytes": len(payload), "pushes_dropped": int(service.metrics.dropped._value.get()),
+        "queue_size": args.queue_size, "rejected": service._rejected,
+        "rss_start_bytes": rss_start, "rss_end_bytes": samples[-1] if samples else rss_start,
+        "rss_max_bytes": max(samples) if samples else rss_start, "peak_rss_bytes": peak_rss_bytes(),
+        "cpu_pinned": cpu, "torch_threads": torch.get_num_threads(), "measured_s": round(elapsed, 2),
     }
     print(json.dumps(report))
     return 0

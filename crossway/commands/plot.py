@@ -1,0 +1,42 @@
+"""``crossway plot``: learning curves from ``crossway train``'s progress.csv files, as PNG."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "plot", help="draw learning curves from progress.csv files (PNG)",
+        description="Draw one curve per progress.csv (written by 'crossway train' into its run directory), "
+                    "e.g. the rolling reach rate against agent-steps.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument("progress", nargs="+", type=Path, help="progress.csv files; NAME=PATH sets a legend name")
+    parser.add_argument("--out", type=Path, required=True, help="PNG file to write")
+    parser.add_argument("--x", default="agent_steps", help="column on the x axis")
+    parser.add_argument("--y", default="reach_rate", help="column on the y axis")
+    parser.add_argument("--title", default="Reach rate (rolling, last 200 episodes)", help="plot title")
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from crossway.plot import plot_curves, read_progress
+
+    if args.out.suffix.lower() != ".png":
+        raise ValueError(f"--out must end in .png, got {args.out.name!r}")
+    if not args.out.parent.is_dir():
+        raise ValueError(f"--out: directory {str(args.out.parent)!r} does not exist")
+    series = []
+    for item in args.progress:
+        text = str(item)
+        name, path = text.split("=", 1) if "=" in text else (Path(text).parent.name, text)
+        if not Path(path).is_file():
+            raise ValueError(f"no such file: {path}")
+        xs, ys = read_progress(Path(path), args.x, args.y)
+        series.append((name, xs, ys))
+    y_range = (0.0, 1.0) if args.y.endswith("rate") else None
+    plot_curves(series, args.out, args.title, args.x.replace("_", " "), args.y.replace("_", " "), y_range)
+    print(f"wrote {args.out}")
+    return 0

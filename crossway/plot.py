@@ -1,0 +1,130 @@
+"""Learning curves as PNG, drawn with cairo (no plotting library needed).
+
+``plot_curves`` draws one or more series of (x, y) points on shared axes with a legend; the
+``crossway plot`` command reads ``progress.csv`` files written by ``crossway train``.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import cairo
+
+COLOURS = [(0.12, 0.47, 0.71), (0.84, 0.15, 0.16), (0.17, 0.63, 0.17), (1.0, 0.5, 0.05), (0.58, 0.40, 0.74)]
+
+
+def read_progress(path: Path, x: str, y: str) -> tuple[list[float], list[float]]:
+    """Two columns of a progress.csv; a clear error names a missing column."""
+    with open(path, newline="") as handle:
+        reader = csv.DictReader(handle)
+        for column in (x, y):
+            if column not in (reader.fieldnames or []):
+                raise ValueError(f"{path}: no column {column!r} (columns: {reader.fieldnames})")
+        xs, ys = [], []
+        for row in reader:
+            xs.append(float(row[x]))
+            ys.append(float(row[y]))
+    if not xs:
+        raise ValueError(f"{path}: no rows")
+    return xs, ys
+
+
+def _nice_ticks(low: float, high: float, count: int = 5) -> list[float]:
+    span = max(high - low, 1e-12)
+    step = 10 ** math.floor(math.log10(span / count))
+    for factor in (1, 2, 5, 10):
+        if span / (step * factor) <= count:
+            step *= factor
+            break
+    first = math.ceil(low / step) * step
+    return [first + i * step for i in range(int((high - first) / step) + 1)]
+
+
+def _label(value: float) -> str:
+    if abs(value) >= 1e6:
+        return f"{value / 1e6:g}M"
+    if abs(value) >= 1e3:
+        return f"{value / 1e3:g}k"
+    return f"{value:g}"
+
+
+def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, title: str, x_label: str,
+                y_label: str, y_range: tuple[float, float] | None = None, width: int = 800,
+                height: int = 480) -> Path:
+    surface = cairo.ImageSurface(cairo.FORMAT_RGB24, width, height)
+    ctx = cairo.Context(surface)
+    ctx.set_source_rgb(1, 1, 1)
+    ctx.paint()
+    left, right, top, bottom = 80, 20, 50, 60
+    all_x = [v for _, xs, _ in series for v in xs]
+    all_y = [v for _, _, ys in series for v in ys]
+    x0, x1 = min(all_x), max(all_x)
+    y0, y1 = y_range if y_range else (min(all_y), max(all_y))
+    x1 = x1 if x1 > x0 else x0 + 1
+    y1 = y1 if y1 > y0 else y0 + 1
+
+    def px(x: float) -> float:
+        return left + (x - x0) / (x1 - x0) * (width - left - right)
+
+    def py(y: float) -> float:
+        return height - bottom - (y - y0) / (y1 - y0) * (height - top - bottom)
+
+    ctx.select_font_face("sans-serif")
+    ctx.set_font_size(12)
+    ctx.set_line_width(1)
+    for tick in _nice_ticks(x0, x1):
+        ctx.set_source_rgb(0.9, 0.9, 0.9)
+        ctx.move_to(px(tick), top)
+        ctx.line_to(px(tick), height - bottom)
+        ctx.stroke()
+        ctx.set_source_rgb(0.2, 0.2, 0.2)
+        text = _label(tick)
+        ctx.move_to(px(tick) - ctx.text_extents(text).width / 2, height - bottom + 18)
+        ctx.show_text(text)
+    for tick in _nice_ticks(y0, y1):
+        ctx.set_source_rgb(0.9, 0.9, 0.9)
+        ctx.move_to(left, py(tick))
+        ctx.line_to(width - right, py(tick))
+        ctx.stroke()
+        ctx.set_source_rgb(0.2, 0.2, 0.2)
+        text = _label(tick)
+        ctx.move_to(left - 8 - ctx.text_extents(text).width, py(tick) + 4)
+        ctx.show_text(text)
+    ctx.set_source_rgb(0, 0, 0)
+    ctx.rectangle(left, top, width - left - right, height - top - bottom)
+    ctx.stroke()
+    ctx.set_font_size(15)
+    ctx.move_to(left, 30)
+    ctx.show_text(title)
+    ctx.set_font_size(13)
+    ctx.move_to(left + (width - left - right) / 2 - ctx.text_extents(x_label).width / 2, height - 18)
+    ctx.show_text(x_label)
+    ctx.save()
+    ctx.move_to(22, top + (height - top - bottom) / 2 + ctx.text_extents(y_label).width / 2)
+    ctx.rotate(-math.pi / 2)
+    ctx.show_text(y_label)
+    ctx.restore()
+    ctx.save()
+    ctx.rectangle(left, top, width - left - right, height - top - bottom)
+    ctx.clip()
+    ctx.set_line_width(2)
+    for i, (_, xs, ys) in enumerate(series):
+        ctx.set_source_rgb(*COLOURS[i % len(COLOURS)])
+        ctx.move_to(px(xs[0]), py(ys[0]))
+        for x, y in zip(xs[1:], ys[1:]):
+            ctx.line_to(px(x), py(y))
+        ctx.stroke()
+    ctx.restore()
+    ctx.set_font_size(12)
+    for i, (name, _, _) in enumerate(series):
+        y = top + 18 + 18 * i
+        ctx.set_source_rgb(*COLOURS[i % len(COLOURS)])
+        ctx.rectangle(width - right - 230, y - 9, 14, 4)
+        ctx.fill()
+        ctx.set_source_rgb(0.1, 0.1, 0.1)
+        ctx.move_to(width - right - 210, y - 3)
+        ctx.show_text(name)
+    surface.write_to_png(str(out))
+    return out
