@@ -157,3 +157,43 @@ def test_train_rejects_bad_arguments(tmp_path):
     result = subprocess.run([sys.executable, "-m", "crossway", "train", "--actors", "0", "--run-dir", str(tmp_path)],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "--actors" in result.stderr
+
+
+def test_bad_pushes_are_counted_by_reason_and_metrics_are_served(tmp_path):
+    import urllib.request
+
+    import numpy as np
+
+    from protocol.messages import EpisodeStats, GradientPush, encode
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    metrics_port = free_port()
+    service = LearnerService(LearnerServiceConfig(
+        run_dir=tmp_path, transport=TransportConfig(listen=(endpoint,)), metrics_port=metrics_port,
+        metrics_address="127.0.0.1", checkpoint_interval_s=3600), log=lambda _: None)
+    thread = threading.Thread(target=service.run, daemon=True)
+    thread.start()
+    good = {name: np.zeros(shape, np.float32) for name, shape in service.core.shapes.items()}
+    wrong_shape = dict(good, **{next(iter(good)): np.zeros((1, 2), np.float32)})
+    stats = (EpisodeStats("easy", "south_0", "stop", "goal", 10, 7.5, 1.0, 1.0, "left"),)
+    try:
+        with open_session(TransportConfig(connect=(endpoint,))) as session:
+            time.sleep(1.0)
+            key = keys.gradients("default")
+            block = zenoh.CongestionControl.BLOCK
+            session.put(key, b"\x93not a push", congestion_control=block)
+            session.put(key, encode(GradientPush("x", 0, 10, wrong_shape, stats)), congestion_control=block)
+            session.put(key, encode(GradientPush("x", 0, 10, good, stats)), congestion_control=block)
+            wait_for(lambda: service.core.version == 1 and service._rejected == 2, 30, "one applied, two refused")
+        assert thread.is_alive()
+        text = urllib.request.urlopen(f"http://127.0.0.1:{metrics_port}/metrics", timeout=10).read().decode()
+        assert 'crossway_rejected_messages_total{reason="malformed"} 1.0' in text
+        assert 'crossway_rejected_messages_total{reason="shape"} 1.0' in text
+        assert 'crossway_episodes_total{end_reason="goal",scenario="easy",sign="stop"} 1.0' in text
+        assert "crossway_weights_version 1.0" in text
+        for name in ("crossway_updates_total", "crossway_gradient_staleness_versions_bucket", "crossway_live_actors",
+                     "crossway_agent_steps_total", "crossway_sigma", "crossway_reach_rate_ratio"):
+            assert name in text
+    finally:
+        service.stop()
+        thread.join(timeout=30)
