@@ -197,3 +197,24 @@ def test_bad_pushes_are_counted_by_reason_and_metrics_are_served(tmp_path):
     finally:
         service.stop()
         thread.join(timeout=30)
+
+
+def test_train_stops_cleanly_on_ctrl_c_and_leaves_a_checkpoint(tmp_path):
+    run_dir = tmp_path / "run"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "crossway", "train", "--scenario", "easy", "--actors", "1", "--minutes", "5",
+         "--run-dir", str(run_dir), "--metrics-port", "0", "--delay-max", "0.5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        progress = run_dir / "progress.csv"
+        wait_for(lambda: progress.exists() and len(progress.read_text().splitlines()) >= 3, 120,
+                 "progress rows")
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0, err
+    assert "interrupted" in err
+    assert list((run_dir / "checkpoints").glob("ckpt-*.pt"))
