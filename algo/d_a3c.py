@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
+from torch.func import functional_call, vmap
 
 from algo.policy import ACTION_SCALE, Policy, PolicyConfig, preprocess
 from simcore.simulator import Simulator, StepResult
@@ -84,7 +85,8 @@ def stream_loss(mu: torch.Tensor, values: torch.Tensor, actions: torch.Tensor, r
 class EpisodeLearner:
     """An agent during one episode: local weights, the current segment and the gradient sum."""
 
-    policy: Policy
+    template: Policy  # the architecture; its own parameters are not used
+    params: dict[str, torch.Tensor]  # this agent's local weights: views into ActorCore.stacked
     base_version: int
     config: DA3CConfig
     views: np.ndarray  # [update_interval + 1, 16, 84, 84] uint8: segment observations
@@ -113,8 +115,9 @@ class EpisodeLearner:
             return
         cfg = self.config
         views, scalars = preprocess(self.views[: n + 1], self.scalars[: n + 1])
-        outputs = self.policy(views, scalars)
-        mu_acc, v_acc, mu_sa, v_sa = outputs
+        # leaves that share storage with the local weights: the step below updates them in place
+        leaves = {name: p.detach().requires_grad_(True) for name, p in self.params.items()}
+        mu_acc, v_acc, mu_sa, v_sa = functional_call(self.template, leaves, (views, scalars))
         boot_acc = 0.0 if terminal else float(v_acc[n].detach())
         boot_sa = 0.0 if terminal else float(v_sa[n].detach())
         actions = torch.from_numpy(self.actions[:n])
@@ -122,15 +125,14 @@ class EpisodeLearner:
         acc = stream_loss(mu_acc[:n], v_acc[:n], actions[:, 0], rewards[:, 0], boot_acc, cfg.gamma, sigma)
         sa = stream_loss(mu_sa[:n], v_sa[:n], actions[:, 1], rewards[:, 1], boot_sa, cfg.gamma, sigma)
         loss = acc.policy + sa.policy + cfg.value_coef * (acc.value + sa.value)
-        self.policy.zero_grad(set_to_none=False)
         loss.backward()
-        params = list(self.policy.parameters())
-        torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
+        torch.nn.utils.clip_grad_norm_(list(leaves.values()), cfg.max_grad_norm)
         with torch.no_grad():
-            for (name, p) in self.policy.named_parameters():
-                self.grad_sum[name].add_(p.grad)
-                p.add_(p.grad, alpha=-cfg.local_learning_rate)
-        self.losses += [float(acc.policy.detach()), float(sa.policy.detach()), float(acc.value.detach()), float(sa.value.detach())]
+            for name, leaf in leaves.items():
+                self.grad_sum[name].add_(leaf.grad)
+                self.params[name].add_(leaf.grad, alpha=-cfg.local_learning_rate)
+        self.losses += [float(acc.policy.detach()), float(sa.policy.detach()),
+                        float(acc.value.detach()), float(sa.value.detach())]
         self.updates += 1
         # the last observation opens the next segment
         self.views[0] = self.views[n]
@@ -161,10 +163,19 @@ class ActorCore:
         self.version = -1  # no weights yet
         self.sigma = 0.65
         self._rng = np.random.default_rng(seed)
+        # every slot's local weights in one tensor per parameter, [slots, ...]: agents act in one
+        # batched call over stacked parameters (torch.func.vmap) instead of one call each
+        self.stacked = {name: p.detach().unsqueeze(0).repeat(sim.num_slots, *([1] * p.dim())).contiguous()
+                        for name, p in self.global_policy.named_parameters()}
+        self._batched_forward = vmap(self._single_forward, in_dims=(0, 0, 0))
         self._learners: list[EpisodeLearner | None] = [None] * sim.num_slots
         self._spare: list[EpisodeLearner] = []
         self._result: StepResult | None = None
         self.agent_steps = 0
+
+    def _single_forward(self, params, views, scalars):
+        mu_acc, _, mu_sa, _ = functional_call(self.global_policy, params, (views[None], scalars[None]))
+        return torch.stack([mu_acc[0], mu_sa[0]])
 
     # weights ------------------------------------------------------------------------------------
 
@@ -176,16 +187,19 @@ class ActorCore:
         self.version = version
         self.sigma = sigma
 
-    def _new_learner(self) -> EpisodeLearner:
+    def _new_learner(self, slot: int) -> EpisodeLearner:
+        """An agent starting its episode on ``slot`` with a local copy of the global weights."""
+        params = {name: self.stacked[name][slot] for name in self.stacked}
+        with torch.no_grad():
+            for name, p in self.global_policy.named_parameters():
+                params[name].copy_(p)
         if self._spare:
             learner = self._spare.pop()
-            learner.policy.load_state_dict(self.global_policy.state_dict())
+            learner.params = params
         else:
-            policy = Policy(self.policy_config)
-            policy.load_state_dict(self.global_policy.state_dict())
             n = self.config.update_interval
             learner = EpisodeLearner(
-                policy=policy, base_version=self.version, config=self.config,
+                template=self.global_policy, params=params, base_version=self.version, config=self.config,
                 views=np.zeros((n + 1, 16, 84, 84), np.uint8), scalars=np.zeros((n + 1, 2), np.float32),
                 actions=np.zeros((n, 2), np.float32), rewards=np.zeros((n, 2), np.float32),
             )
@@ -193,7 +207,7 @@ class ActorCore:
         learner.length = 0
         learner.updates = 0
         learner.losses[:] = 0.0
-        learner.grad_sum = {name: torch.zeros_like(p) for name, p in learner.policy.named_parameters()}
+        learner.grad_sum = {name: torch.zeros_like(p) for name, p in params.items()}
         return learner
 
     # stepping -----------------------------------------------------------------------------------
@@ -207,23 +221,42 @@ class ActorCore:
 
     def _admit(self, result: StepResult) -> None:
         for slot in np.flatnonzero(result.started).tolist():
-            learner = self._new_learner()
+            learner = self._new_learner(slot)
             learner.observe(result.views[slot], result.scalars[slot])
             self._learners[slot] = learner
+
+    def means(self, active: list[int]) -> np.ndarray:
+        """Gaussian means [slots, 2] of the cars on ``active`` slots, each from its own weights.
+
+        With at least half the lanes busy, all slots go through one batched call over the
+        stacked local weights (idle slots compute on zeros); otherwise each car acts alone.
+        """
+        means = np.zeros((self.sim.num_slots, 2), np.float32)
+        with torch.no_grad():
+            if 2 * len(active) >= self.sim.num_slots > 1:
+                views = np.zeros((self.sim.num_slots, 16, 84, 84), np.uint8)
+                scalars = np.zeros((self.sim.num_slots, 2), np.float32)
+                for slot in active:
+                    learner = self._learners[slot]
+                    views[slot] = learner.views[learner.length]
+                    scalars[slot] = learner.scalars[learner.length]
+                means[:] = self._batched_forward(self.stacked, *preprocess(views, scalars)).numpy()
+            else:
+                for slot in active:
+                    learner = self._learners[slot]
+                    v, s = preprocess(learner.views[learner.length][None], learner.scalars[learner.length][None])
+                    mu_acc, _, mu_sa, _ = functional_call(self.global_policy, learner.params, (v, s))
+                    means[slot] = (float(mu_acc[0]), float(mu_sa[0]))
+        return means
 
     def act(self) -> tuple[np.ndarray, np.ndarray]:
         """Sample actions for every car on the road: (normalised samples, simulator actions)."""
         samples = np.zeros((self.sim.num_slots, 2), np.float32)
-        for slot, learner in enumerate(self._learners):
-            if learner is None:
-                continue
-            views, scalars = preprocess(learner.views[learner.length][None], learner.scalars[learner.length][None])
-            with torch.no_grad():
-                mu_acc, _, mu_sa, _ = learner.policy(views, scalars)
-            mean = np.array([float(mu_acc[0]), float(mu_sa[0])], np.float32)
-            samples[slot] = mean + self.sigma * self._rng.standard_normal(2).astype(np.float32)
-        env_actions = np.clip(samples, -1.0, 1.0) * ACTION_SCALE
-        return samples, env_actions
+        active = [slot for slot, learner in enumerate(self._learners) if learner is not None]
+        if active:
+            noise = self._rng.standard_normal((len(active), 2)).astype(np.float32)
+            samples[active] = self.means(active)[active] + self.sigma * noise
+        return samples, np.clip(samples, -1.0, 1.0) * ACTION_SCALE
 
     def step(self) -> list[FinishedEpisode]:
         """One simulator step for every agent, local updates where due; returns ended episodes."""

@@ -115,3 +115,25 @@ def test_actor_core_sums_local_gradients_per_episode():
         assert norm > 0.0
         assert set(episode.gradients) == set(learner.shapes)
         learner.apply(episode.gradients, episode.base_version, episode.agent_steps)
+
+
+def test_agents_hold_their_own_weights_and_batched_acting_matches_one_by_one():
+    sim = Simulator("medium", SimConfig(delay_max_s=0.0), seed=3)
+    core = ActorCore(sim, config=DA3CConfig(update_interval=3), seed=3)
+    core.set_weights(0, 0.3, LearnerCore().weights())
+    core.reset()
+    for _ in range(7):
+        core.step()
+    # after local updates on different data the slots' weights differ
+    first = core.stacked["acc.hidden.weight"]
+    assert not torch.equal(first[0], first[1])
+    active = [slot for slot, learner in enumerate(core._learners) if learner is not None]
+    assert len(active) == 4
+    batched = core.means(active)  # all four lanes busy: one vmap call
+    one_by_one = np.zeros_like(batched)
+    for slot, learner in enumerate(core._learners):
+        views, scalars = preprocess(learner.views[learner.length][None], learner.scalars[learner.length][None])
+        with torch.no_grad():
+            mu_acc, _, mu_sa, _ = torch.func.functional_call(core.global_policy, learner.params, (views, scalars))
+        one_by_one[slot] = (float(mu_acc[0]), float(mu_sa[0]))
+    np.testing.assert_allclose(batched, one_by_one, atol=1e-5)
