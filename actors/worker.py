@@ -117,7 +117,7 @@ class ActorService:
             self.log(f"actor {self.actor_id}: {cfg.scenario}, waiting for the learner's weights "
                      f"({list(cfg.transport.connect) or list(cfg.transport.listen)})")
             while not self._stop.is_set() and not self.fetch_weights(session):
-                pass
+                self._stop.wait(1.0)  # no learner yet: ask again in a second
             if self._stop.is_set():
                 return 0
             self.log(f"actor {self.actor_id}: got weights version {self.core.version}, driving")
