@@ -1,0 +1,135 @@
+"""Pieces of the paper's experiments: IDM traffic, the TTC computation, the infraction check."""
+
+import math
+
+import numpy as np
+import pytest
+
+from evaluation.right_of_way import entry_step, find_infractions
+from evaluation.ttc import lowest_ttc, time_to_axis
+from simcore.dynamics import VEHICLE_LENGTH
+from simcore.idm import IDMParameters, equilibrium_gap, idm_acceleration
+from simcore.rightofway import Sign, build_priority_table
+from simcore.scenario import build_intersection, load_scenario
+
+P = IDMParameters()
+
+
+# -- IDM ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("speed", [0.0, 3.0, 6.0, 8.5])
+def test_idm_equilibrium_gap_is_where_acceleration_vanishes(speed):
+    v0 = 10.0
+    gap = equilibrium_gap(speed, v0)
+    assert gap == pytest.approx((2.0 + 1.5 * speed) / math.sqrt(1 - (speed / v0) ** 4))
+    assert float(idm_acceleration(speed, v0, gap, 0.0)) == pytest.approx(0.0, abs=1e-9)
+    assert float(idm_acceleration(speed, v0, 0.9 * gap, 0.0)) < 0.0  # closer: brake
+    assert float(idm_acceleration(speed, v0, 1.1 * gap, 0.0)) > 0.0  # further: speed up
+
+
+def test_idm_free_road_accelerates_to_the_desired_speed():
+    v, dt = 0.0, 0.1
+    assert float(idm_acceleration(0.0, 10.0)) == pytest.approx(P.max_acceleration)
+    for _ in range(600):
+        v += float(idm_acceleration(v, 10.0)) * dt
+    assert v == pytest.approx(10.0, abs=0.1)
+
+
+def test_idm_stops_behind_a_stopped_obstacle():
+    """A car at 10 m/s, 60 m (net) behind a stopped car, halts without touching it."""
+    position, speed, obstacle, dt = 0.0, 10.0, 60.0, 0.1
+    smallest_gap = np.inf
+    for _ in range(600):
+        gap = obstacle - position
+        acceleration = float(idm_acceleration(speed, 12.0, gap, speed - 0.0))
+        speed = max(0.0, speed + acceleration * dt)
+        position += speed * dt
+        smallest_gap = min(smallest_gap, obstacle - position)
+    assert speed == pytest.approx(0.0, abs=0.05)
+    assert 0.0 < smallest_gap
+    assert obstacle - position == pytest.approx(P.minimum_gap_m, abs=0.6)
+
+
+def test_idm_refuses_impossible_equilibrium():
+    with pytest.raises(ValueError, match="steady following"):
+        equilibrium_gap(12.0, 10.0)
+
+
+# -- TTC ------------------------------------------------------------------------------------------
+
+
+def test_ttc_by_hand():
+    # ego at the origin heading north (its axis is the line x = 0)
+    ego = (0.0, 0.0, math.pi / 2)
+    # a car 20 m east heading west at 5 m/s crosses x = 0 in 4 s
+    assert float(time_to_axis(*ego, 20.0, 30.0, math.pi, 5.0)) == pytest.approx(4.0)
+    # a car 12 m west heading north-east at 6 m/s: lateral speed 6 cos(45 deg) -> 12 / 4.243 s
+    assert float(time_to_axis(*ego, -12.0, 0.0, math.pi / 4, 6.0)) == pytest.approx(12.0 / (6 * math.cos(math.pi / 4)))
+    # moving away, parallel, or standing: never
+    assert math.isinf(float(time_to_axis(*ego, 20.0, 0.0, 0.0, 5.0)))
+    assert math.isinf(float(time_to_axis(*ego, 20.0, 0.0, math.pi / 2, 5.0)))
+    assert math.isinf(float(time_to_axis(*ego, 20.0, 0.0, math.pi, 0.0)))
+    # on the line already
+    assert float(time_to_axis(*ego, 0.0, 15.0, math.pi, 5.0)) == 0.0
+    cars = np.array([[20.0, 30.0, math.pi, 5.0], [-30.0, 5.0, 0.0, 10.0], [10.0, 0.0, 0.0, 3.0]])
+    assert lowest_ttc(*ego, cars) == pytest.approx(3.0)
+    assert math.isinf(lowest_ttc(*ego, np.zeros((0, 4))))
+
+
+# -- infractions ----------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def medium():
+    intersection = build_intersection(load_scenario("medium"))
+    table = build_priority_table(intersection)
+
+    def route(lane, turn):
+        entry = next(l for l in intersection.lanes if l.name == lane)
+        return next(r for r in entry.routes if intersection.routes[r].turn == turn)
+
+    return table, route("south_0", "straight"), route("east_0", "straight")
+
+
+def track(zone_start, entry, steps=60):
+    """An s track that reaches ``zone_start`` (front) exactly at step ``entry``, 1 m per step."""
+    return zone_start - 0.5 * VEHICLE_LENGTH + (np.arange(steps) - entry) * 1.0
+
+
+def test_entering_before_the_car_with_priority_is_an_infraction(medium):
+    table, south, east = medium
+    routes = np.array([south, east])
+    signs = np.array([Sign.STOP, Sign.NONE])  # east has priority
+    tracks = np.stack([track(table.zone_start[south, east], 10), track(table.zone_start[east, south], 20)])
+    found = find_infractions(table, routes, signs, tracks)
+    assert len(found) == 1
+    assert (found[0].offender, found[0].wronged) == (0, 1)
+    assert (found[0].offender_entry_step, found[0].wronged_entry_step) == (10, 20)
+
+
+def test_letting_the_car_with_priority_go_first_is_not(medium):
+    table, south, east = medium
+    routes = np.array([south, east])
+    signs = np.array([Sign.STOP, Sign.NONE])
+    tracks = np.stack([track(table.zone_start[south, east], 30), track(table.zone_start[east, south], 20)])
+    assert find_infractions(table, routes, signs, tracks) == []
+
+
+def test_no_infraction_when_the_car_with_priority_never_crosses(medium):
+    table, south, east = medium
+    tracks = np.stack([track(table.zone_start[south, east], 10), np.full(60, np.nan)])
+    tracks[1, :5] = 10.0  # on the road for five steps, far from the zone, then gone (crashed, say)
+    assert find_infractions(table, np.array([south, east]), np.array([Sign.STOP, Sign.NONE]), tracks) == []
+
+
+def test_equal_signs_use_priority_to_the_right(medium):
+    table, south, east = medium  # east is on the south car's right
+    tracks = np.stack([track(table.zone_start[south, east], 10), track(table.zone_start[east, south], 20)])
+    found = find_infractions(table, np.array([south, east]), np.array([Sign.YIELD, Sign.YIELD]), tracks)
+    assert [(f.offender, f.wronged) for f in found] == [(0, 1)]
+
+
+def test_entry_step():
+    assert entry_step(np.array([np.nan, 1.0, 5.0, 9.0]), 5.0 + 0.5 * VEHICLE_LENGTH) == 2
+    assert entry_step(np.array([np.nan, 1.0]), 50.0) is None
