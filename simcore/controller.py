@@ -37,15 +37,18 @@ class ScriptedDriver:
     def act(self) -> np.ndarray:
         sim = self.sim
         actions = np.zeros((sim.num_slots, 2))
-        idx = np.flatnonzero(sim.present)
-        self._standing_s[~sim.present] = 0.0
-        if len(idx) == 0:
+        idx = np.flatnonzero(sim.present)  # every car, traffic included, is someone to yield to
+        learners = sim.learners_present
+        self._standing_s[~learners] = 0.0
+        if not learners.any():
             return actions
         higher = sim.priorities(idx) if self.yield_to_priority else np.zeros((len(idx),) * 2, bool)
         zone_start = sim.priority.zone_start
         merge_at = sim.priority.merge_at
         half = 0.5 * VEHICLE_LENGTH
         for a, slot in enumerate(idx.tolist()):
+            if slot >= sim.num_slots:
+                continue  # traffic drives itself
             path = sim.intersection.routes[sim.route[slot]].path
             speed = sim.speed[slot]
             s_front = sim.s[slot] + half
@@ -77,7 +80,7 @@ class ScriptedDriver:
                     braking = -speed * speed / (2.0 * gap) if gap > 0.5 else -MAX_ACCELERATION
                     acceleration = min(acceleration, braking)
             actions[slot] = (acceleration, steering)
-        standing = sim.present & (sim.speed < 0.5)
+        standing = learners & (sim.speed[: sim.num_slots] < 0.5)
         self._standing_s[standing] += DT
         self._standing_s[~standing] = 0.0
         np.clip(actions[:, 0], -MAX_ACCELERATION, MAX_ACCELERATION, out=actions[:, 0])

@@ -163,7 +163,7 @@ class IntersectionParallelEnv(ParallelEnv):
             return None
         from simcore.render import render_frame
 
-        present = np.flatnonzero(self.sim.present)
+        present = np.flatnonzero(self.sim.learners_present)
         focus = int(present[0]) if len(present) else None
         return render_frame(self.sim, self._last_result, focus)
 

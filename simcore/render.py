@@ -226,7 +226,7 @@ def _text(ctx: cairo.Context, x: float, y: float, text: str, colour=TEXT) -> Non
 
 def _status_lines(sim, result, focus_slot, focus_ok: bool, episodes, caption: str) -> list[tuple[str, bool]]:
     """The panel's text as (line, is_heading) pairs."""
-    on_road = int(np.count_nonzero(sim.present))
+    on_road = int(np.count_nonzero(sim.learners_present))
     lines = [(caption or f"{sim.spec.name}   t = {sim.time_s:.1f} s", True),
              (f"cars on the road: {on_road} of {sim.num_slots} lanes", False)]
     if episodes is not None:
@@ -246,7 +246,7 @@ def _status_lines(sim, result, focus_slot, focus_ok: bool, episodes, caption: st
 
 def _legend(sim, traffic) -> list[tuple[str, tuple[float, float, float]]]:
     items = [("learning car", LEARNER_GREEN)]
-    if traffic is not None:
+    if traffic is not None or sim.num_traffic:
         items.append(("traffic car", TRAFFIC_WHITE))
     items += [("stop line", STOP_RED), ("yield line", YIELD_YELLOW)]
     return items
@@ -333,7 +333,7 @@ def render_frame(sim, result=None, focus_slot: int | None = None, pixels_per_m: 
     if focus_ok:
         _draw_focus_route(ctx, sim, focus_slot)
     _draw_signs(ctx, sim)
-    cars = np.flatnonzero(sim.present)
+    cars = np.flatnonzero(sim.learners_present)
     if focus_ok and not sim.present[focus_slot]:
         cars = np.append(cars, focus_slot)  # ended this step: keep it at its last pose
     _draw_boxes(ctx, np.stack([sim.x[cars], sim.y[cars], sim.heading[cars]], axis=1),
@@ -343,8 +343,11 @@ def render_frame(sim, result=None, focus_slot: int | None = None, pixels_per_m: 
         ctx.set_source_rgb(*TRAFFIC_WHITE)
         ctx.set_line_width(0.3)
         ctx.stroke()
+    scripted = sim.traffic_poses()  # the simulator's own IDM traffic
     if traffic is not None:
-        _draw_boxes(ctx, traffic, TRAFFIC_WHITE, (0.3, 0.3, 0.3))
+        scripted = np.concatenate([scripted, traffic])
+    if len(scripted):
+        _draw_boxes(ctx, scripted, TRAFFIC_WHITE, (0.3, 0.3, 0.3))
     if focus_ok:
         _draw_focus_square(ctx, sim, focus_slot)
     ctx.restore()
@@ -397,7 +400,7 @@ def choose_focus(sim, previous: int | None = None, lane: str | None = None) -> i
         return sim.slot_names.index(lane)
     if previous is not None and sim.present[previous]:
         return previous
-    present = np.flatnonzero(sim.present)
+    present = np.flatnonzero(sim.learners_present)
     return int(present[0]) if len(present) else previous
 
 

@@ -37,6 +37,7 @@ from simcore.dynamics import (
     boxes_overlap,
 )
 from simcore.geometry import wrap_to_pi
+from simcore.idm import IDMParameters, idm_acceleration
 from simcore.rewards import (
     END_REASON_NAMES,
     EndReason,
@@ -66,6 +67,24 @@ class SimConfig:
     start_all_at_reset: bool = True  # reset starts an episode on every lane at once
     observe: bool = True  # render views; False skips them (scripted policies, fast evaluation)
     skip_idle: bool = False  # with no car on the road, jump straight to the next start
+    # fixed signs per arm, e.g. (("south", "stop"), ("east", "none"), ...): never redrawn;
+    # None: random signs (paper, "Environment")
+    signs: tuple[tuple[str, str], ...] | None = None
+    traffic: "TrafficConfig | None" = None  # scripted IDM traffic besides the learners
+
+
+@dataclass(frozen=True)
+class TrafficConfig:
+    """Scripted traffic cars (paper, "Comparison with TTC method"): they follow the centre of their
+    route and control their speed with the IDM (``simcore.idm``); they are not learners."""
+
+    lanes: tuple[str, ...]  # entry lanes traffic cars start from
+    max_cars: int = 4  # at most this many traffic cars on the road at once
+    delay_min_s: float = 0.0  # shortest wait before a traffic car starts again [s]
+    delay_max_s: float = 20.0  # longest wait before a traffic car starts again [s]
+    turns: tuple[str, ...] = ("straight",)  # routes traffic may take
+    spawn_clearance_m: float = 15.0  # a lane's start must be this clear of cars before a start [m]
+    idm: IDMParameters = IDMParameters()
 
 
 @dataclass
@@ -128,23 +147,67 @@ class Simulator:
             if unknown or not config.lanes:
                 problems.append(f"lanes: unknown or empty {unknown or list(config.lanes)}; "
                                 f"scenario {self.spec.name!r} has {lane_names}")
+        self._fixed_signs = self._check_signs(config.signs, problems)
+        self._traffic_routes = self._check_traffic(config.traffic, lane_names, problems)
         if problems:
             raise ValueError("invalid simulator options: " + "; ".join(problems))
         self.slot_lanes = [i for i, n in enumerate(lane_names) if config.lanes is None or n in config.lanes]
         self.slot_names = [lane_names[i] for i in self.slot_lanes]
-        self.num_slots = len(self.slot_lanes)
+        self.num_slots = len(self.slot_lanes)  # learner slots: the first num_slots vehicles
+        self.num_traffic = config.traffic.max_cars if config.traffic else 0  # traffic vehicles after them
+        self.num_vehicles = self.num_slots + self.num_traffic
         self.priority = build_priority_table(self.intersection)
-        self.renderer = ViewRenderer(self.intersection, self.num_slots) if config.observe else None
+        self.renderer = ViewRenderer(self.intersection, self.num_vehicles) if config.observe else None
         self._route_paths = [r.path for r in self.intersection.routes]
         self._route_length = np.array([r.path.length for r in self.intersection.routes])
         self._half_width = 0.5 * self.spec.lane_width_m
         self._rng = np.random.default_rng(seed)
         self._allocate()
 
+    def _check_signs(self, signs, problems: list[str]) -> np.ndarray | None:
+        if signs is None:
+            return None
+        names = {b.name: i for i, b in enumerate(self.intersection.branches)}
+        by_name = {v: k for k, v in SIGN_NAMES.items()}
+        fixed = np.zeros(len(names), dtype=np.int8)
+        given = dict(signs)
+        if set(given) != set(names):
+            problems.append(f"signs: give one sign for each arm {sorted(names)}, got {sorted(given)}")
+            return None
+        for arm, sign in given.items():
+            if sign not in by_name:
+                problems.append(f"signs: {arm!r} has unknown sign {sign!r} (use {sorted(by_name)})")
+                return None
+            fixed[names[arm]] = int(by_name[sign])
+        return fixed
+
+    def _check_traffic(self, traffic, lane_names: list[str], problems: list[str]) -> dict[int, list[int]]:
+        """Routes traffic may take from each of its lanes."""
+        if traffic is None:
+            return {}
+        routes: dict[int, list[int]] = {}
+        if not 1 <= traffic.max_cars <= 200:
+            problems.append(f"traffic.max_cars must be 1-200, got {traffic.max_cars}")
+        if not 0.0 <= traffic.delay_min_s <= traffic.delay_max_s:
+            problems.append(f"traffic delays must satisfy 0 <= min <= max, got {traffic.delay_min_s}, "
+                            f"{traffic.delay_max_s}")
+        for name in traffic.lanes:
+            if name not in lane_names:
+                problems.append(f"traffic.lanes: unknown lane {name!r}; scenario has {lane_names}")
+                continue
+            lane = self.intersection.lanes[lane_names.index(name)]
+            allowed = [r for r in lane.routes if self.intersection.routes[r].turn in traffic.turns]
+            if not allowed:
+                problems.append(f"traffic: lane {name!r} has no route turning {list(traffic.turns)}")
+            routes[lane.index] = allowed
+        if not traffic.lanes:
+            problems.append("traffic.lanes: give at least one lane")
+        return routes
+
     # -- state ------------------------------------------------------------------------------------
 
     def _allocate(self) -> None:
-        k = self.num_slots
+        k = self.num_vehicles
         self.present = np.zeros(k, dtype=bool)
         self.x = np.zeros(k)
         self.y = np.zeros(k)
@@ -162,11 +225,25 @@ class Simulator:
         self.return_acc = np.zeros(k)
         self.return_sa = np.zeros(k)
         self.episode_count = np.zeros(k, dtype=np.int64)
+        self.lane_of = np.zeros(k, dtype=np.intp)  # entry lane of each vehicle's current trip
+        self.lane_of[: self.num_slots] = self.slot_lanes
+        self.is_traffic = np.arange(k) >= self.num_slots
         self.branch_signs = np.zeros(len(self.intersection.branches), dtype=np.int8)
         self.time_s = 0.0
         self.next_sign_change_s = math.inf
-        self._history = np.zeros((k, CHANNELS, HISTORY, VIEW_SIZE_PX * VIEW_SIZE_PX), dtype=np.uint8)
-        self._scalars = np.zeros((k, 2), dtype=np.float32)
+        learners = self.num_slots
+        self._history = np.zeros((learners, CHANNELS, HISTORY, VIEW_SIZE_PX * VIEW_SIZE_PX), dtype=np.uint8)
+        self._scalars = np.zeros((learners, 2), dtype=np.float32)
+
+    @property
+    def learners_present(self) -> np.ndarray:
+        """[slots] bool: learning cars on the road (``present`` also covers traffic)."""
+        return self.present[: self.num_slots]
+
+    def traffic_poses(self) -> np.ndarray:
+        """[N, 3] x [m], y [m], heading [rad] of the traffic cars on the road."""
+        idx = self.num_slots + np.flatnonzero(self.present[self.num_slots:])
+        return np.stack([self.x[idx], self.y[idx], self.heading[idx]], axis=1)
 
     def seed(self, seed: int | None) -> None:
         self._rng = np.random.default_rng(seed)
@@ -176,18 +253,25 @@ class Simulator:
         if seed is not None:
             self.seed(seed)
         self._allocate()
-        self.branch_signs = draw_signs(self._rng, len(self.branch_signs))
-        if self.sign_interval_s > 0.0:
-            self.next_sign_change_s = self.sign_interval_s
-        if self.config.start_all_at_reset:
-            self.wait_until[:] = 0.0
+        if self._fixed_signs is not None:
+            self.branch_signs = self._fixed_signs.copy()
         else:
-            self.wait_until[:] = self._rng.uniform(self.delay_min_s, self.delay_max_s, self.num_slots)
+            self.branch_signs = draw_signs(self._rng, len(self.branch_signs))
+            if self.sign_interval_s > 0.0:
+                self.next_sign_change_s = self.sign_interval_s
+        k = self.num_slots
+        if self.config.start_all_at_reset:
+            self.wait_until[:k] = 0.0
+        else:
+            self.wait_until[:k] = self._rng.uniform(self.delay_min_s, self.delay_max_s, k)
+        traffic = self.config.traffic
+        if traffic is not None:
+            self.wait_until[k:] = self._rng.uniform(traffic.delay_min_s, traffic.delay_max_s, self.num_traffic)
         result = self._blank_result()
-        self._start_due(result, blocked=np.zeros(self.num_slots, dtype=bool))
+        self._start_due(result, blocked=np.zeros(self.num_vehicles, dtype=bool))
         if self.config.skip_idle:
             self._skip_idle(result)
-        self._observe(result, self.present.copy())
+        self._observe(result, self.learners_present.copy())
         return result
 
     # -- stepping ---------------------------------------------------------------------------------
@@ -200,7 +284,7 @@ class Simulator:
                 f"actions must have shape ({self.num_slots}, 2): one row per slot of "
                 f"[acceleration m/s^2, steering rad]; got shape {actions.shape}"
             )
-        bad = self.present & ~np.isfinite(actions).all(axis=1)
+        bad = self.learners_present & ~np.isfinite(actions).all(axis=1)
         if bad.any():
             names = [self.slot_names[i] for i in np.flatnonzero(bad)]
             raise ValueError(f"actions must be finite numbers; NaN or infinite for agents on lanes {names}")
@@ -209,7 +293,8 @@ class Simulator:
     def step(self, actions) -> StepResult:
         actions = self.validate_actions(actions)
         result = self._blank_result()
-        acted = self.present.copy()
+        k = self.num_slots
+        acted = self.learners_present.copy()
         result.acted[:] = acted
         idx = np.flatnonzero(acted)
         if len(idx):
@@ -221,32 +306,82 @@ class Simulator:
             self.speed[idx] = np.minimum(self.speed[idx], self.target_speed[idx])
             self.steps[idx] += 1
             self.speed_sum[idx] += self.speed[idx]
+        traffic_idx = k + np.flatnonzero(self.present[k:])
+        self._drive_traffic(traffic_idx)
         self.time_s += DT
         self._localise(idx)
-        reasons, crashed_into_higher = self._detect_ends(idx)
+        moving = np.concatenate([idx, traffic_idx])
+        reasons_all, crashed_into_higher_all = self._detect_ends(moving)
+        reasons, crashed_into_higher = reasons_all[: len(idx)], crashed_into_higher_all[: len(idx)]
         self._reward(idx, reasons, crashed_into_higher, result)
-        ended = np.zeros(self.num_slots, dtype=bool)
+        ended = np.zeros(k, dtype=bool)
         ended[idx] = reasons != EndReason.RUNNING
         result.end_reason[idx] = reasons
         result.terminated[:] = ended
         self._schedule_waits(ended)
+        traffic_done = traffic_idx[reasons_all[len(idx):] != EndReason.RUNNING]
         # "hard": signs are redrawn together and every episode restarts (paper, "Environment")
         if self.time_s >= self.next_sign_change_s - 1e-9:
-            cut = self.present & ~ended
+            cut = self.learners_present & ~ended
             result.end_reason[cut] = EndReason.SIGN_CHANGE
             result.truncated[cut] = True
             ended |= cut
             self._redraw_all_signs()
         for slot in np.flatnonzero(ended):
             result.episodes.append(self._summary(slot, EndReason(result.end_reason[slot])))
-        blocked = ended.copy()  # a lane that just ended waits at least one step
-        seen = self.present.copy()
-        self.present &= ~ended
+        blocked = np.zeros(self.num_vehicles, dtype=bool)
+        blocked[:k] = ended  # a lane that just ended waits at least one step
+        blocked[traffic_done] = True
+        seen = self.learners_present.copy()
+        self.present[:k] &= ~ended
+        self._end_traffic(traffic_done)
         self._start_due(result, blocked)
-        if self.config.skip_idle and not self.present.any():
+        if self.config.skip_idle and not self.learners_present.any() and self.config.traffic is None:
             self._skip_idle(result)
-        self._observe(result, seen | self.present)
+        self._observe(result, seen | self.learners_present)
         return result
+
+    # -- scripted traffic (paper, "Comparison with TTC method") ----------------------------------
+
+    def _drive_traffic(self, idx: np.ndarray) -> None:
+        """Traffic cars follow their route's centre exactly, at the speed the IDM gives."""
+        if len(idx) == 0:
+            return
+        params = self.config.traffic.idm
+        others = np.flatnonzero(self.present)
+        for v in idx.tolist():
+            path = self._route_paths[self.route[v]]
+            gap, closing = np.inf, 0.0
+            for u in others.tolist():  # the nearest car ahead in this route's corridor leads
+                if u == v:
+                    continue
+                s_u, r_u = path.local_coordinates((self.x[u], self.y[u]))
+                ahead = s_u - self.s[v]
+                if 0.0 < ahead < gap + VEHICLE_LENGTH and abs(r_u) < self.spec.lane_width_m:
+                    gap = ahead - VEHICLE_LENGTH
+                    heading_gap = self.heading[u] - self.heading[v]
+                    closing = self.speed[v] - self.speed[u] * math.cos(heading_gap)
+            acceleration = float(idm_acceleration(self.speed[v], self.target_speed[v], gap, closing, params))
+            self.speed[v] = min(max(self.speed[v] + acceleration * DT, 0.0), self.target_speed[v])
+            self.s[v] = min(self.s[v] + self.speed[v] * DT, path.length)
+            self.x[v], self.y[v] = path.position(self.s[v], 0.0)
+            self.heading[v] = path.heading_at(self.s[v])
+            self.steps[v] += 1
+
+    def _end_traffic(self, done: np.ndarray) -> None:
+        if len(done) == 0:
+            return
+        traffic = self.config.traffic
+        self.present[done] = False
+        self.wait_until[done] = self.time_s + self._rng.uniform(traffic.delay_min_s, traffic.delay_max_s, len(done))
+
+    def _lane_start_clear(self, lane_index: int, clearance_m: float) -> bool:
+        start = self.intersection.routes[self.intersection.lanes[lane_index].routes[0]].path.position(0.0, 0.0)
+        others = np.flatnonzero(self.present)
+        if len(others) == 0:
+            return True
+        distance = np.hypot(self.x[others] - start[0], self.y[others] - start[1])
+        return bool(distance.min() >= clearance_m)
 
     def _blank_result(self) -> StepResult:
         k = self.num_slots
@@ -299,9 +434,11 @@ class Simulator:
                     higher = self.priorities(idx)
                     crashed_into_higher[a] |= higher[a, b]
                     crashed_into_higher[b] |= higher[b, a]
-        off_path = (np.abs(self.r[idx]) > self._half_width) | (np.abs(self.heading_error[idx]) > 0.5 * math.pi)
-        goal = self.s[idx] >= self._route_length[self.route[idx]]
-        time_over = self.steps[idx] * DT >= self.time_limit_s - 1e-9
+        learner = ~self.is_traffic[idx]
+        off_path = learner & ((np.abs(self.r[idx]) > self._half_width) |
+                              (np.abs(self.heading_error[idx]) > 0.5 * math.pi))
+        goal = self.s[idx] >= self._route_length[self.route[idx]] - 1e-9
+        time_over = learner & (self.steps[idx] * DT >= self.time_limit_s - 1e-9)
         # precedence: crash, off path, goal, time over
         reasons[time_over] = EndReason.TIME_OVER
         reasons[goal] = EndReason.GOAL
@@ -332,30 +469,58 @@ class Simulator:
     # -- episodes, signs and waits ---------------------------------------------------------------
 
     def _schedule_waits(self, ended: np.ndarray) -> None:
+        """Learners whose episode ended (``ended`` [slots]) wait U[delay_min, delay_max]."""
         count = int(ended.sum())
         if count:
             delays = self._rng.uniform(self.delay_min_s, self.delay_max_s, count)
-            self.wait_until[ended] = self.time_s + delays
+            self.wait_until[: self.num_slots][ended] = self.time_s + delays
 
     def _redraw_all_signs(self) -> None:
         self.branch_signs = draw_signs(self._rng, len(self.branch_signs))
         self.next_sign_change_s += self.sign_interval_s
-        # everyone restarts together at the next step (paper, "Environment")
-        self.wait_until[:] = self.time_s + DT
+        # every learner restarts together at the next step (paper, "Environment")
+        self.wait_until[: self.num_slots] = self.time_s + DT
 
     def _start_due(self, result: StepResult, blocked: np.ndarray) -> None:
         due = ~self.present & ~blocked & (self.wait_until <= self.time_s + 1e-9)
-        for slot in np.flatnonzero(due).tolist():
-            self._start_episode(slot)
-            result.started[slot] = True
+        traffic = self.config.traffic
+        for v in np.flatnonzero(due).tolist():
+            if v < self.num_slots:
+                # with traffic about, a learner waits until its lane's start is clear
+                if traffic is not None and not self._lane_start_clear(self.slot_lanes[v], traffic.spawn_clearance_m):
+                    continue
+                self._start_episode(v)
+                result.started[v] = True
+            else:
+                self._start_traffic(v)
+
+    def _start_traffic(self, v: int) -> None:
+        traffic = self.config.traffic
+        clear = [lane for lane in self._traffic_routes
+                 if self._lane_start_clear(lane, traffic.spawn_clearance_m)]
+        if not clear:
+            return  # try again next step
+        rng = self._rng
+        lane_index = clear[int(rng.integers(len(clear)))]
+        routes = self._traffic_routes[lane_index]
+        route_index = routes[int(rng.integers(len(routes)))]
+        self._place(v, lane_index, route_index)
 
     def _start_episode(self, slot: int) -> None:
         rng = self._rng
         lane = self.intersection.lanes[self.slot_lanes[slot]]
-        if self.sign_interval_s <= 0.0:  # a new sign with every episode (paper, "Environment")
+        if self.sign_interval_s <= 0.0 and self._fixed_signs is None:
+            # a new sign with every episode (paper, "Environment")
             self.branch_signs[lane.branch] = redraw_one_sign(rng, self.branch_signs, lane.branch)
         route_index = lane.routes[int(rng.integers(len(lane.routes)))]
+        self._place(slot, lane.index, route_index)
+
+    def _place(self, slot: int, lane_index: int, route_index: int) -> None:
+        """Put a vehicle at the start of a route with the paper's speed ranges."""
+        rng = self._rng
+        lane = self.intersection.lanes[lane_index]
         path = self._route_paths[route_index]
+        self.lane_of[slot] = lane_index
         self.route[slot] = route_index
         self.sign[slot] = self.branch_signs[lane.branch]
         self.x[slot], self.y[slot] = path.position(0.0, 0.0)
@@ -374,14 +539,16 @@ class Simulator:
 
     def _skip_idle(self, result: StepResult) -> None:
         """Nothing on the road: jump to the next start (or sign change) instead of stepping through."""
-        while not self.present.any():
-            next_start = float(self.wait_until.min())
+        while not self.learners_present.any():
+            next_start = float(self.wait_until[: self.num_slots].min())
             if next_start >= self.next_sign_change_s:
                 self.time_s = self.next_sign_change_s
                 self._redraw_all_signs()
                 continue
             self.time_s = max(self.time_s, next_start)
-            self._start_due(result, blocked=np.zeros(self.num_slots, dtype=bool))
+            self._start_due(result, blocked=np.zeros(self.num_vehicles, dtype=bool))
+            if self.config.traffic is not None and not self.learners_present.any():
+                self.time_s += DT  # a learner's lane start is still blocked: let time pass
 
     # -- observations -----------------------------------------------------------------------------
 
@@ -393,11 +560,13 @@ class Simulator:
         self._scalars[idx, 1] = self.target_speed[idx]
         if self.renderer is None or len(idx) == 0:
             return
-        higher = self.priorities(idx)
-        shades = np.zeros((len(idx), self.num_slots + 1), dtype=np.uint8)
-        labels = idx + 1
+        # every car on the road is drawn, traffic included; the egos are the learners in ``idx``
+        cars = np.union1d(idx, self.num_slots + np.flatnonzero(self.present[self.num_slots:]))
+        higher = self.priorities(cars)[np.searchsorted(cars, idx)]
+        shades = np.zeros((len(idx), self.num_vehicles + 1), dtype=np.uint8)
+        labels = cars + 1
         shades[:, labels] = np.where(higher, HIGHER_PRIORITY, EGO_OR_LOWER)
-        self.renderer.draw_vehicles(self.x[idx], self.y[idx], self.heading[idx], labels)
+        self.renderer.draw_vehicles(self.x[cars], self.y[cars], self.heading[cars], labels)
         frames = np.empty((len(idx), CHANNELS, VIEW_SIZE_PX * VIEW_SIZE_PX), dtype=np.uint8)
         lanes = np.asarray(self.slot_lanes)[idx]
         self.renderer.render(self.x[idx], self.y[idx], self.heading[idx], self.route[idx],
