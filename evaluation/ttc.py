@@ -32,3 +32,54 @@ def lowest_ttc(ego_x: float, ego_y: float, ego_heading: float, cars: np.ndarray)
         return float("inf")
     cars = np.asarray(cars, dtype=np.float64)
     return float(time_to_axis(ego_x, ego_y, ego_heading, cars[:, 0], cars[:, 1], cars[:, 2], cars[:, 3]).min())
+
+
+class TTCDriver:
+    """The paper's rule-based baseline for the learner slots of a ``Simulator``.
+
+    Each car decelerates to stop at its stop line, then waits until the lowest TTC over all
+    traffic cars exceeds ``threshold_s`` and goes at +3 m/s^2 along its route's centre (pure
+    pursuit steering: the baseline does not predict steering). Once going it does not stop again.
+    """
+
+    def __init__(self, sim, threshold_s: float, stop_margin_m: float = 0.5):
+        if not threshold_s > 0:
+            raise ValueError(f"the TTC threshold must be > 0 s, got {threshold_s}")
+        self.sim = sim
+        self.threshold_s = threshold_s
+        self.stop_margin_m = stop_margin_m  # stop with the front this far before the line [m]
+        self.going = np.zeros(sim.num_slots, dtype=bool)
+
+    def act(self) -> np.ndarray:
+        import math
+
+        from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
+
+        sim = self.sim
+        actions = np.zeros((sim.num_slots, 2))
+        self.going[~sim.learners_present] = False
+        traffic = sim.num_slots + np.flatnonzero(sim.present[sim.num_slots:])
+        cars = np.stack([sim.x[traffic], sim.y[traffic], sim.heading[traffic], sim.speed[traffic]], axis=1)
+        for slot in np.flatnonzero(sim.learners_present).tolist():
+            route = sim.intersection.routes[sim.route[slot]]
+            speed = sim.speed[slot]
+            lookahead = max(6.0, 1.2 * speed)
+            tx, ty = route.path.position(sim.s[slot] + lookahead, 0.0)
+            alpha = math.atan2(ty - sim.y[slot], tx - sim.x[slot]) - sim.heading[slot]
+            steering = math.atan2(2.0 * WHEELBASE * math.sin(alpha), lookahead)
+            to_line = route.junction_entry_s - self.stop_margin_m - (sim.s[slot] + 0.5 * VEHICLE_LENGTH)
+            if not self.going[slot]:
+                stopped = speed < 0.1 and to_line < 1.0
+                if stopped and lowest_ttc(sim.x[slot], sim.y[slot], sim.heading[slot], cars) > self.threshold_s:
+                    self.going[slot] = True
+            if self.going[slot]:
+                acceleration = MAX_ACCELERATION
+            elif to_line > 0.05:
+                acceleration = -speed * speed / (2.0 * to_line)  # constant deceleration to the line
+                if speed < 1.0 and to_line > 2.0:
+                    acceleration = 1.0  # creep up to the line
+            else:
+                acceleration = -MAX_ACCELERATION
+            actions[slot] = (np.clip(acceleration, -MAX_ACCELERATION, MAX_ACCELERATION),
+                             np.clip(steering, -MAX_STEERING, MAX_STEERING))
+        return actions

@@ -133,3 +133,46 @@ def test_equal_signs_use_priority_to_the_right(medium):
 def test_entry_step():
     assert entry_step(np.array([np.nan, 1.0, 5.0, 9.0]), 5.0 + 0.5 * VEHICLE_LENGTH) == 2
     assert entry_step(np.array([np.nan, 1.0]), 50.0) is None
+
+
+# -- the TTC baseline driver -----------------------------------------------------------------------
+
+
+def ttc_sim(traffic_cars: int):
+    from simcore.simulator import SimConfig, Simulator, TrafficConfig
+
+    signs = (("south", "stop"), ("east", "none"), ("west", "none"), ("north", "none"))
+    traffic = TrafficConfig(lanes=("east_0", "east_1", "west_0", "west_1"), max_cars=traffic_cars,
+                            delay_max_s=2.0) if traffic_cars else None
+    return Simulator("hard", SimConfig(lanes=("south_1",), signs=signs, traffic=traffic, observe=False,
+                                       delay_min_s=100.0, delay_max_s=100.0), seed=1)
+
+
+def test_ttc_driver_stops_at_the_line_then_crosses_an_empty_junction():
+    from evaluation.ttc import TTCDriver
+
+    sim = ttc_sim(0)
+    sim.reset()
+    driver = TTCDriver(sim, threshold_s=4.0)
+    route = sim.intersection.routes[sim.route[0]]
+    stopped_at = None
+    for step in range(400):
+        result = sim.step(driver.act())
+        if stopped_at is None and sim.speed[0] < 0.1:
+            stopped_at = sim.s[0] + 0.5 * VEHICLE_LENGTH
+        if result.terminated[0]:
+            break
+    assert stopped_at is not None and route.junction_entry_s - 1.5 < stopped_at <= route.junction_entry_s
+    assert result.episodes[0].end_reason == "goal"
+
+
+def test_ttc_driver_waits_for_a_gap_in_traffic():
+    from evaluation.ttc import TTCDriver
+
+    sim = ttc_sim(12)
+    sim.reset()
+    patient = TTCDriver(sim, threshold_s=1e6)  # no gap is ever long enough
+    for _ in range(300):
+        result = sim.step(patient.act())
+        assert not result.terminated[0] or result.episodes[0].end_reason == "time_over"
+    assert not patient.going[0] or not sim.present[0]
