@@ -1,0 +1,62 @@
+"""Drive a simulator's learner slots with a trained policy (no learning): for evaluation.
+
+Every car uses the same (global) weights, so all cars on the road act in one batched forward
+pass. By default the cars take the Gaussian mean; ``sigma`` > 0 samples as in training.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from algo.policy import ACTION_SCALE, Policy, PolicyConfig, preprocess
+
+
+def load_policy(checkpoint: str | Path) -> Policy:
+    """A policy from a learner checkpoint; a clear error if the file or network does not fit."""
+    path = Path(checkpoint)
+    if not path.is_file():
+        raise ValueError(f"no checkpoint file {str(path)!r}")
+    try:
+        state = torch.load(path, weights_only=False, map_location="cpu")
+    except Exception as error:  # torch raises several types for a file that is not a checkpoint
+        raise ValueError(f"{path} is not a crossway checkpoint ({type(error).__name__}: {error})") from None
+    if not isinstance(state, dict) or "policy" not in state or "policy_config" not in state:
+        raise ValueError(f"{path} is not a crossway learner checkpoint (no policy or policy_config)")
+    try:
+        config = PolicyConfig(**state["policy_config"])
+    except TypeError as error:
+        raise ValueError(f"{path}: its network description does not match this crossway ({error})") from None
+    policy = Policy(config)
+    try:
+        policy.load_state_dict(state["policy"])
+    except RuntimeError as error:
+        raise ValueError(f"{path}: its weights do not match the network {config} ({str(error)[:200]})") from None
+    policy.eval()
+    return policy
+
+
+class PolicyDriver:
+    """Acts for every learner slot of a ``Simulator`` from the newest ``StepResult``."""
+
+    def __init__(self, sim, policy: Policy, sigma: float = 0.0, seed: int | None = None):
+        self.sim = sim
+        self.policy = policy
+        self.sigma = sigma
+        self._rng = np.random.default_rng(seed)
+
+    def act(self, result) -> np.ndarray:
+        actions = np.zeros((self.sim.num_slots, 2))
+        active = np.flatnonzero(self.sim.learners_present)
+        if len(active) == 0:
+            return actions
+        views, scalars = preprocess(result.views[active], result.scalars[active])
+        with torch.no_grad():
+            mu_acc, _, mu_sa, _ = self.policy(views, scalars)
+        means = np.stack([mu_acc.numpy(), mu_sa.numpy()], axis=1)
+        if self.sigma > 0:
+            means = means + self.sigma * self._rng.standard_normal(means.shape)
+        actions[active] = np.clip(means, -1.0, 1.0) * ACTION_SCALE
+        return actions

@@ -1,0 +1,179 @@
+"""The paper's Table I protocol (section "Results").
+
+For a scenario trained with delays up to D seconds, run tests with delay_min = 0 and delay_max
+= 10, 20, ..., D seconds (3 tests for easy, 5 for medium, 10 for hard); each test counts
+``episodes`` finished episodes (episodes cut short by a sign change are not counted). Per
+traffic sign, report the fractions of reaches, crashes, off-roads and time-overs and the
+average speed, each averaged over the tests.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import queue
+import sys
+import time
+from collections import Counter, defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+SIGNS = ("none", "yield", "stop")
+OUTCOMES = ("goal", "crash", "off_path", "time_over")
+COLUMN_NAMES = {"goal": "Reaches", "crash": "Crashes", "off_path": "Off-roads", "time_over": "Time-overs"}
+
+# Table I of the paper: per scenario and sign, (reaches, crashes, off-roads, time-overs, speed m/s)
+PAPER_TABLE1 = {
+    "easy": {"none": (0.998, 0.002, 0.0, 0.0, 8.533), "yield": (0.995, 0.005, 0.0, 0.0, 8.280),
+             "stop": (0.992, 0.008, 0.0, 0.0, 8.105)},
+    "medium": {"none": (0.995, 0.005, 0.0, 0.0, 8.394), "yield": (0.991, 0.009, 0.0, 0.0, 7.939),
+               "stop": (0.992, 0.008, 0.0, 0.0, 7.446)},
+    "hard": {"none": (0.997, 0.003, 0.0, 0.0, 8.244), "yield": (0.991, 0.009, 0.0, 0.0, 7.365),
+             "stop": (0.972, 0.012, 0.0, 0.016, 5.855)},
+}
+
+
+@dataclass(frozen=True)
+class TestSpec:
+    scenario: str
+    delay_max_s: float
+    episodes: int
+    seed: int
+    checkpoint: str | None  # None: the scripted driver (a stand-in for tests and smoke runs)
+
+
+def delay_schedule(training_delay_max_s: float) -> list[float]:
+    """10, 20, ... up to the training delay_max (paper: 3, 5 and 10 tests)."""
+    count = max(1, int(round(training_delay_max_s / 10.0)))
+    return [10.0 * (i + 1) for i in range(count)]
+
+
+def run_test(spec: TestSpec, progress=None) -> dict:
+    """One test: counts per sign and end reason, summed speeds; runs in a worker process."""
+    import torch
+
+    from evaluation.policy import PolicyDriver, load_policy
+    from simcore.controller import ScriptedDriver
+    from simcore.simulator import SimConfig, Simulator
+
+    torch.set_num_threads(1)
+    sim = Simulator(spec.scenario, SimConfig(delay_min_s=0.0, delay_max_s=spec.delay_max_s,
+                                             observe=spec.checkpoint is not None), seed=spec.seed)
+    result = sim.reset()
+    if spec.checkpoint is not None:
+        driver = PolicyDriver(sim, load_policy(spec.checkpoint))
+        act = lambda: driver.act(result)  # noqa: E731 - reads the newest result
+    else:
+        act = ScriptedDriver(sim).act
+    counts: dict[str, Counter] = defaultdict(Counter)
+    speed_sum: Counter = Counter()
+    done = 0
+    while done < spec.episodes:
+        result = sim.step(act())
+        for episode in result.episodes:
+            if episode.end_reason not in OUTCOMES or done >= spec.episodes:
+                continue  # cut short by a sign change: not an outcome
+            counts[episode.sign][episode.end_reason] += 1
+            speed_sum[episode.sign] += episode.mean_speed_mps
+            done += 1
+            if progress is not None and done % 25 == 0:
+                progress.put(25)
+    if progress is not None and done % 25:
+        progress.put(done % 25)
+    return {"delay_max_s": spec.delay_max_s, "counts": {s: dict(c) for s, c in counts.items()},
+            "speed_sum": dict(speed_sum)}
+
+
+def summarise(tests: list[dict]) -> dict:
+    """Per sign: each outcome's fraction and the mean speed, averaged over the tests."""
+    table = {}
+    for sign in SIGNS:
+        rows = []
+        for test in tests:
+            counts = test["counts"].get(sign, {})
+            total = sum(counts.values())
+            if total == 0:
+                continue
+            row = {o: counts.get(o, 0) / total for o in OUTCOMES}
+            row["speed_mps"] = test["speed_sum"].get(sign, 0.0) / total
+            row["episodes"] = total
+            rows.append(row)
+        if rows:
+            table[sign] = {key: sum(r[key] for r in rows) / len(rows) for key in (*OUTCOMES, "speed_mps")}
+            table[sign]["episodes"] = sum(r["episodes"] for r in rows)
+    return table
+
+
+def markdown(scenario: str, table: dict) -> str:
+    paper = PAPER_TABLE1.get(scenario, {})
+    header = "| | " + " | ".join(f"{s} (ours) | {s} (paper)" for s in SIGNS) + " |"
+    lines = [header, "|---|" + "---|" * (2 * len(SIGNS))]
+    for i, outcome in enumerate((*OUTCOMES, "speed_mps")):
+        name = COLUMN_NAMES.get(outcome, "Average speed [m/s]")
+        cells = []
+        for sign in SIGNS:
+            ours = table.get(sign, {}).get(outcome)
+            theirs = paper.get(sign, (None,) * 5)[i]
+            fmt = "{:.3f}"
+            cells += [fmt.format(ours) if ours is not None else "-", fmt.format(theirs) if theirs is not None else "-"]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines.append("| Episodes | " + " | ".join(f"{table.get(s, {}).get('episodes', 0)} | 3000 per test" for s in SIGNS) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, meta: dict) -> list[Path]:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stem = out_dir / f"table1-{scenario}"
+    json_path = stem.with_suffix(".json")
+    json_path.write_text(json.dumps({"meta": meta, "tests": tests, "table": table,
+                                     "paper": PAPER_TABLE1.get(scenario)}, indent=2))
+    csv_path = stem.with_suffix(".csv")
+    paper = PAPER_TABLE1.get(scenario, {})
+    rows = ["sign,metric,ours,paper"]
+    for sign in SIGNS:
+        for i, metric in enumerate((*OUTCOMES, "speed_mps")):
+            ours = table.get(sign, {}).get(metric)
+            theirs = paper.get(sign, (None,) * 5)[i]
+            rows.append(f"{sign},{metric},{'' if ours is None else round(ours, 5)},{'' if theirs is None else theirs}")
+    csv_path.write_text("\n".join(rows) + "\n")
+    md_path = stem.with_suffix(".md")
+    md_path.write_text(f"# Table I, {scenario}\n\n{meta['command']}\n\n" + markdown(scenario, table))
+    return [json_path, csv_path, md_path]
+
+
+def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
+               out_dir: Path, command: str) -> dict:
+    from simcore.scenario import load_scenario
+
+    spec = load_scenario(scenario)
+    if checkpoint is not None:
+        from evaluation.policy import load_policy
+
+        load_policy(checkpoint)  # refuse a bad checkpoint before starting workers
+    tests = [TestSpec(spec.name, d, episodes, seed + i, checkpoint)
+             for i, d in enumerate(delay_schedule(spec.episodes.delay_max_s))]
+    total = episodes * len(tests)
+    started = time.monotonic()
+    context = multiprocessing.get_context("spawn")
+    with context.Manager() as manager:
+        progress = manager.Queue()
+        with context.Pool(processes=min(workers, len(tests))) as pool:
+            pending = pool.starmap_async(run_test, [(t, progress) for t in tests])
+            done = 0
+            while not pending.ready() or not progress.empty():
+                try:
+                    done += progress.get(timeout=0.5)
+                except queue.Empty:
+                    continue
+                elapsed = time.monotonic() - started
+                eta = elapsed / max(done, 1) * (total - done)
+                print(f"\rtable1 {spec.name}: {done}/{total} episodes, {elapsed:5.0f} s, ETA {eta:5.0f} s",
+                      end="", file=sys.stderr, flush=True)
+            results = pending.get()
+    print(file=sys.stderr)
+    table = summarise(results)
+    meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
+            "delays_max_s": [t.delay_max_s for t in tests], "seed": seed, "workers": workers,
+            "wall_s": round(time.monotonic() - started, 1), "command": command}
+    paths = write_outputs(out_dir, spec.name, results, table, meta)
+    return {"table": table, "paths": paths, "meta": meta}

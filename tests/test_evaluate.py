@@ -1,0 +1,68 @@
+"""crossway evaluate: the Table I protocol end to end on tiny budgets."""
+
+import csv
+import json
+import subprocess
+import sys
+
+import pytest
+import torch
+
+from algo.policy import PolicyConfig
+from evaluation.table1 import delay_schedule, summarise
+from learner.core import LearnerCore
+
+
+def crossway(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "crossway", *args], capture_output=True, text=True, timeout=timeout)
+
+
+def test_delay_schedule_matches_the_paper():
+    assert delay_schedule(30) == [10, 20, 30]
+    assert len(delay_schedule(50)) == 5 and len(delay_schedule(100)) == 10
+
+
+def test_summary_averages_fractions_over_tests():
+    tests = [
+        {"counts": {"stop": {"goal": 3, "crash": 1}}, "speed_sum": {"stop": 32.0}},
+        {"counts": {"stop": {"goal": 1, "time_over": 1}}, "speed_sum": {"stop": 10.0}},
+    ]
+    table = summarise(tests)
+    assert table["stop"]["goal"] == pytest.approx((0.75 + 0.5) / 2)
+    assert table["stop"]["crash"] == pytest.approx(0.125)
+    assert table["stop"]["time_over"] == pytest.approx(0.25)
+    assert table["stop"]["speed_mps"] == pytest.approx((8.0 + 5.0) / 2)
+    assert table["stop"]["episodes"] == 6 and "none" not in table
+
+
+def test_table1_scripted_end_to_end(tmp_path):
+    result = crossway("evaluate", "table1", "--scripted", "--scenario", "easy", "--episodes", "6",
+                      "--workers", "2", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert "| Reaches |" in result.stdout
+    report = json.loads((tmp_path / "table1-easy.json").read_text())
+    assert [t["delay_max_s"] for t in report["tests"]] == [10.0, 20.0, 30.0]
+    assert sum(sum(c.values()) for t in report["tests"] for c in t["counts"].values()) == 18
+    rows = list(csv.DictReader(open(tmp_path / "table1-easy.csv")))
+    assert set(rows[0]) == {"sign", "metric", "ours", "paper"}
+    assert {r["metric"] for r in rows} == {"goal", "crash", "off_path", "time_over", "speed_mps"}
+    assert "(paper)" in (tmp_path / "table1-easy.md").read_text()
+
+
+def test_table1_with_a_checkpoint_and_a_refused_one(tmp_path):
+    good = tmp_path / "good.pt"
+    torch.save(LearnerCore().state_dict(), good)
+    result = crossway("evaluate", "table1", "--checkpoint", str(good), "--scenario", "easy", "--episodes", "2",
+                      "--workers", "1", "--out", str(tmp_path / "out"))
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "out" / "table1-easy.md").exists()
+    other = tmp_path / "other.pt"
+    torch.save(LearnerCore(policy_config=PolicyConfig(hidden=32)).state_dict(), other)
+    state = torch.load(other, weights_only=False)
+    state["policy_config"] = {"conv1_channels": 16, "conv2_channels": 16, "hidden": 128}  # lies about its sizes
+    torch.save(state, other)
+    refused = crossway("evaluate", "table1", "--checkpoint", str(other), "--episodes", "1", "--out", str(tmp_path))
+    assert refused.returncode == 2
+    assert "do not match the network" in refused.stderr and "Traceback" not in refused.stderr
+    neither = crossway("evaluate", "table1", "--out", str(tmp_path))
+    assert neither.returncode == 2 and "--checkpoint" in neither.stderr
