@@ -56,3 +56,116 @@ def find_infractions(table: PriorityTable, routes: np.ndarray, signs: np.ndarray
             if a_entry is not None and b_entry is not None and a_entry < b_entry:
                 found.append(Infraction(a, b, a_entry, b_entry))
     return found
+
+
+# -- the test itself ---------------------------------------------------------------------------------
+
+PAPER_TABLE2 = {"easy": 0.985, "medium": 0.990, "hard": 0.863}  # "No infraction" fractions (Table II)
+
+
+def run_episodes(scenario: str, checkpoint: str | None, episodes: int, seed: int, progress=None) -> dict:
+    """Synchronised episodes: every lane starts at once with a random route and sign, all cars at
+    the same current and target speed; an episode ends when every car has ended (paper,
+    "Testing the Right of Way Rule"). Runs in a worker process."""
+    import torch
+
+    from evaluation.policy import PolicyDriver, load_policy
+    from simcore.controller import ScriptedDriver
+    from simcore.simulator import SimConfig, Simulator
+
+    torch.set_num_threads(1)
+    config = SimConfig(start_all_at_reset=True, delay_min_s=1e9, delay_max_s=1e9, sign_change_interval_s=0.0,
+                       equal_speeds=True, observe=checkpoint is not None)
+    sim = Simulator(scenario, config, seed=seed)
+    policy = load_policy(checkpoint) if checkpoint is not None else None
+    clean = 0
+    infraction_counts = []
+    end_reasons: dict[str, int] = {}
+    limit = int(sim.time_limit_s / 0.1) + 2
+    for episode in range(episodes):
+        result = sim.reset()
+        driver = PolicyDriver(sim, policy) if policy is not None else ScriptedDriver(sim)
+        routes, signs = sim.route[: sim.num_slots].copy(), sim.sign[: sim.num_slots].copy()
+        tracks = np.full((sim.num_slots, limit), np.nan)
+        tracks[:, 0] = sim.s[: sim.num_slots]
+        step = 0
+        while sim.learners_present.any() and step + 1 < limit:
+            result = sim.step(driver.act(result) if policy is not None else driver.act())
+            step += 1
+            acted = result.acted
+            tracks[acted, step] = sim.s[: sim.num_slots][acted]
+            for summary in result.episodes:
+                end_reasons[summary.end_reason] = end_reasons.get(summary.end_reason, 0) + 1
+        found = find_infractions(sim.priority, routes, signs, tracks[:, : step + 1])
+        infraction_counts.append(len(found))
+        clean += not found
+        if progress is not None:
+            progress.put(1)
+    return {"episodes": episodes, "no_infraction": clean, "infractions_per_episode": infraction_counts,
+            "end_reasons": end_reasons}
+
+
+def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
+                     out_dir, command: str) -> dict:
+    """The whole test in parallel workers; writes JSON, CSV and Markdown into ``out_dir``."""
+    import json
+    import multiprocessing
+    import queue
+    import sys
+    import time
+    from pathlib import Path
+
+    from simcore.scenario import load_scenario
+
+    spec = load_scenario(scenario)
+    if checkpoint is not None:
+        from evaluation.policy import load_policy
+
+        load_policy(checkpoint)
+    workers = max(1, min(workers, episodes))
+    shares = [episodes // workers + (i < episodes % workers) for i in range(workers)]
+    started = time.monotonic()
+    context = multiprocessing.get_context("spawn")
+    with context.Manager() as manager:
+        progress = manager.Queue()
+        with context.Pool(processes=workers) as pool:
+            pending = pool.starmap_async(run_episodes, [(spec.name, checkpoint, n, seed + 1000 * i, progress)
+                                                        for i, n in enumerate(shares)])
+            done, shown = 0, -1.0
+            while not pending.ready() or not progress.empty():
+                try:
+                    done += progress.get(timeout=0.5)
+                except queue.Empty:
+                    continue
+                elapsed = time.monotonic() - started
+                if elapsed - shown < 0.5 and done < episodes:
+                    continue  # at most two progress updates a second
+                shown = elapsed
+                print(f"\rright-of-way {spec.name}: {done}/{episodes} episodes, {elapsed:5.0f} s, "
+                      f"ETA {elapsed / done * (episodes - done):5.0f} s", end="", file=sys.stderr, flush=True)
+            parts = pending.get()
+    print(file=sys.stderr)
+    clean = sum(p["no_infraction"] for p in parts)
+    end_reasons: dict[str, int] = {}
+    for part in parts:
+        for reason, count in part["end_reasons"].items():
+            end_reasons[reason] = end_reasons.get(reason, 0) + count
+    summary = {"scenario": spec.name, "episodes": episodes, "no_infraction": clean / episodes,
+               "infraction": 1.0 - clean / episodes, "paper_no_infraction": PAPER_TABLE2.get(spec.name),
+               "agent_end_reasons": end_reasons, "checkpoint": checkpoint, "seed": seed, "workers": workers,
+               "wall_s": round(time.monotonic() - started, 1), "command": command}
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stem = out_dir / f"right-of-way-{spec.name}"
+    stem.with_suffix(".json").write_text(json.dumps(summary, indent=2))
+    paper = PAPER_TABLE2.get(spec.name)
+    stem.with_suffix(".csv").write_text(
+        "scenario,episodes,no_infraction,infraction,paper_no_infraction\n"
+        f"{spec.name},{episodes},{summary['no_infraction']:.4f},{summary['infraction']:.4f},{'' if paper is None else paper}\n")
+    table = ("| | ours | paper |\n|---|---|---|\n"
+             f"| No infraction | {summary['no_infraction']:.3f} | {'-' if paper is None else f'{paper:.3f}'} |\n"
+             f"| Infraction | {summary['infraction']:.3f} | {'-' if paper is None else f'{1 - paper:.3f}'} |\n")
+    stem.with_suffix(".md").write_text(f"# Right-of-way test (Table II), {spec.name}\n\n{command}\n\n{table}")
+    summary["markdown"] = table
+    summary["paths"] = [str(stem.with_suffix(x)) for x in (".json", ".csv", ".md")]
+    return summary

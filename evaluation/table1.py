@@ -159,13 +159,16 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
         progress = manager.Queue()
         with context.Pool(processes=min(workers, len(tests))) as pool:
             pending = pool.starmap_async(run_test, [(t, progress) for t in tests])
-            done = 0
+            done, shown = 0, -1.0
             while not pending.ready() or not progress.empty():
                 try:
                     done += progress.get(timeout=0.5)
                 except queue.Empty:
                     continue
                 elapsed = time.monotonic() - started
+                if elapsed - shown < 0.5 and done < total:
+                    continue  # at most two progress updates a second
+                shown = elapsed
                 eta = elapsed / max(done, 1) * (total - done)
                 print(f"\rtable1 {spec.name}: {done}/{total} episodes, {elapsed:5.0f} s, ETA {eta:5.0f} s",
                       end="", file=sys.stderr, flush=True)

@@ -71,6 +71,9 @@ class SimConfig:
     # None: random signs (paper, "Environment")
     signs: tuple[tuple[str, str], ...] | None = None
     traffic: "TrafficConfig | None" = None  # scripted IDM traffic besides the learners
+    # every learner gets the same initial and target speed, drawn once per reset (the paper's
+    # right-of-way test: cars reach the junction almost together)
+    equal_speeds: bool = False
 
 
 @dataclass(frozen=True)
@@ -259,6 +262,7 @@ class Simulator:
             self.branch_signs = draw_signs(self._rng, len(self.branch_signs))
             if self.sign_interval_s > 0.0:
                 self.next_sign_change_s = self.sign_interval_s
+        self._shared_speeds = (self._rng.uniform(*INITIAL_SPEED_RANGE), self._rng.uniform(*TARGET_SPEED_RANGE))
         k = self.num_slots
         if self.config.start_all_at_reset:
             self.wait_until[:k] = 0.0
@@ -525,8 +529,11 @@ class Simulator:
         self.sign[slot] = self.branch_signs[lane.branch]
         self.x[slot], self.y[slot] = path.position(0.0, 0.0)
         self.heading[slot] = path.heading_at(0.0)
-        self.speed[slot] = rng.uniform(*INITIAL_SPEED_RANGE)
-        self.target_speed[slot] = rng.uniform(*TARGET_SPEED_RANGE)
+        if self.config.equal_speeds and slot < self.num_slots:
+            self.speed[slot], self.target_speed[slot] = self._shared_speeds
+        else:
+            self.speed[slot] = rng.uniform(*INITIAL_SPEED_RANGE)
+            self.target_speed[slot] = rng.uniform(*TARGET_SPEED_RANGE)
         self.s[slot] = 0.0
         self.r[slot] = 0.0
         self.heading_error[slot] = 0.0

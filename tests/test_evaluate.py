@@ -66,3 +66,17 @@ def test_table1_with_a_checkpoint_and_a_refused_one(tmp_path):
     assert "do not match the network" in refused.stderr and "Traceback" not in refused.stderr
     neither = crossway("evaluate", "table1", "--out", str(tmp_path))
     assert neither.returncode == 2 and "--checkpoint" in neither.stderr
+
+
+def test_right_of_way_scripted_end_to_end(tmp_path):
+    result = crossway("evaluate", "right-of-way", "--scripted", "--scenario", "easy", "--episodes", "4",
+                      "--workers", "2", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert "| No infraction |" in result.stdout
+    summary = json.loads((tmp_path / "right-of-way-easy.json").read_text())
+    assert summary["episodes"] == 4
+    assert 0.0 <= summary["no_infraction"] <= 1.0
+    assert summary["no_infraction"] + summary["infraction"] == pytest.approx(1.0)
+    assert sum(summary["agent_end_reasons"].values()) == 4 * 3  # every lane's car ended, every episode
+    rows = list(csv.DictReader(open(tmp_path / "right-of-way-easy.csv")))
+    assert rows[0]["paper_no_infraction"] == "0.985"
