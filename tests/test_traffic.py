@@ -104,3 +104,13 @@ def test_traffic_runs_are_reproducible():
 def test_bad_traffic_and_sign_options_are_refused(config, message):
     with pytest.raises(ValueError, match=message):
         Simulator("hard", config)
+
+
+def test_equal_speeds_give_every_learner_the_same_start():
+    sim = Simulator("hard", SimConfig(equal_speeds=True), seed=4)
+    sim.reset()
+    assert np.unique(sim.speed[: sim.num_slots]).size == 1
+    assert np.unique(sim.target_speed[: sim.num_slots]).size == 1
+    first = (sim.speed[0], sim.target_speed[0])
+    sim.reset()
+    assert (sim.speed[0], sim.target_speed[0]) != first  # drawn again at every reset
