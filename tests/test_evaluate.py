@@ -80,3 +80,28 @@ def test_right_of_way_scripted_end_to_end(tmp_path):
     assert sum(summary["agent_end_reasons"].values()) == 4 * 3  # every lane's car ended, every episode
     rows = list(csv.DictReader(open(tmp_path / "right-of-way-easy.csv")))
     assert rows[0]["paper_no_infraction"] == "0.985"
+
+
+def test_ttc_comparison_end_to_end(tmp_path):
+    good = tmp_path / "good.pt"
+    torch.save(LearnerCore().state_dict(), good)
+    result = crossway("evaluate", "ttc", "--checkpoint", str(good), "--episodes", "2", "--delays", "20",
+                      "--workers", "2", "--out", str(tmp_path / "out"))
+    assert result.returncode == 0, result.stderr
+    rows = list(csv.DictReader(open(tmp_path / "out" / "ttc-comparison.csv")))
+    assert {r["driver"] for r in rows} == {"ttc", "policy"}
+    assert {r["level"] for r in rows} == {"low", "medium", "high"}
+    assert {"goal_rate", "crash_rate", "off_path_rate", "time_over_rate", "episodes"} <= set(rows[0])
+    assert all(int(r["episodes"]) == 2 for r in rows)
+    for name in ("ttc-goal.png", "ttc-time_over.png"):
+        assert (tmp_path / "out" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_ttc_sweep_reports_and_rejects_bad_input(tmp_path):
+    bad = crossway("evaluate", "ttc", "--delays", "20,x", "--out", str(tmp_path))
+    assert bad.returncode == 2 and "--delays" in bad.stderr
+    swept = crossway("evaluate", "ttc", "--sweep", "1000", "--episodes", "1", "--delays", "20", "--workers", "2",
+                     "--out", str(tmp_path))
+    # with an unreachable threshold the ego never goes: no crash, so 1000 s is chosen
+    assert swept.returncode == 0, swept.stderr
+    assert "sweep: chose 1000 s" in swept.stdout

@@ -1,0 +1,160 @@
+"""The paper's comparison with the TTC method (section "Comparison with TTC method", Fig. 5).
+
+On hard, the ego starts from the stop-sign arm (south); traffic cars start from the two
+adjacent arms (east and west, both lanes, main road without signs), go straight along their
+route's centre and control their speed with the IDM. Traffic levels low, medium and high allow
+at most 4, 8 and 12 traffic cars; each test raises the traffic's delay_max by 20 s. The TTC
+agent and the learned policy drive the same episodes: the same seeds, the same traffic draws.
+
+Half of each test's episodes start the ego on the inner lane (left or straight), half on the
+outer lane (straight or right).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import multiprocessing
+import queue
+import sys
+import time
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+TRAFFIC_LEVELS = {"low": 4, "medium": 8, "high": 12}
+SIGNS = (("south", "stop"), ("east", "none"), ("west", "none"), ("north", "none"))
+TRAFFIC_LANES = ("east_0", "east_1", "west_0", "west_1")
+EGO_LANES = ("south_0", "south_1")
+EGO_WAIT_S = (0.0, 2.0)  # the ego's wait between its episodes [s]
+
+
+@dataclass(frozen=True)
+class TTCTest:
+    driver: str  # "ttc" or "policy"
+    level: str
+    delay_max_s: float
+    episodes: int
+    seed: int
+    threshold_s: float
+    checkpoint: str | None
+
+
+def run_ttc_test(test: TTCTest, progress=None) -> dict:
+    """Episodes of one (driver, traffic level, delay) cell; counts end reasons of the ego."""
+    import torch
+
+    from evaluation.policy import PolicyDriver, load_policy
+    from evaluation.ttc import TTCDriver
+    from simcore.simulator import SimConfig, Simulator, TrafficConfig
+
+    torch.set_num_threads(1)
+    counts: Counter = Counter()
+    policy = load_policy(test.checkpoint) if test.driver == "policy" else None
+    per_lane = [test.episodes // 2 + test.episodes % 2, test.episodes // 2]
+    for lane, episodes in zip(EGO_LANES, per_lane):
+        if episodes == 0:
+            continue
+        traffic = TrafficConfig(lanes=TRAFFIC_LANES, max_cars=TRAFFIC_LEVELS[test.level],
+                                delay_min_s=0.0, delay_max_s=test.delay_max_s)
+        config = SimConfig(lanes=(lane,), signs=SIGNS, traffic=traffic, delay_min_s=EGO_WAIT_S[0],
+                           delay_max_s=EGO_WAIT_S[1], observe=policy is not None, start_all_at_reset=False)
+        sim = Simulator("hard", config, seed=test.seed + (lane == EGO_LANES[1]))
+        result = sim.reset()
+        driver = PolicyDriver(sim, policy) if policy is not None else TTCDriver(sim, test.threshold_s)
+        for _ in range(300):  # let traffic fill the road before the first ego episode counts
+            result = sim.step(driver.act(result) if policy is not None else driver.act())
+        done = 0
+        while done < episodes:
+            result = sim.step(driver.act(result) if policy is not None else driver.act())
+            for episode in result.episodes:
+                counts[episode.end_reason] += 1
+                done += 1
+                if progress is not None:
+                    progress.put(1)
+    total = sum(counts.values())
+    return {"driver": test.driver, "level": test.level, "delay_max_s": test.delay_max_s, "episodes": total,
+            "threshold_s": test.threshold_s, **{f"{k}_rate": counts.get(k, 0) / total
+                                                for k in ("goal", "crash", "off_path", "time_over")}}
+
+
+def _run_all(tests: list[TTCTest], workers: int, label: str) -> list[dict]:
+    total = sum(t.episodes for t in tests)
+    started = time.monotonic()
+    context = multiprocessing.get_context("spawn")
+    with context.Manager() as manager:
+        progress = manager.Queue()
+        with context.Pool(processes=max(1, min(workers, len(tests)))) as pool:
+            pending = pool.starmap_async(run_ttc_test, [(t, progress) for t in tests])
+            done, shown = 0, -1.0
+            while not pending.ready() or not progress.empty():
+                try:
+                    done += progress.get(timeout=0.5)
+                except queue.Empty:
+                    continue
+                elapsed = time.monotonic() - started
+                if elapsed - shown < 0.5 and done < total:
+                    continue
+                shown = elapsed
+                print(f"\r{label}: {done}/{total} episodes, {elapsed:5.0f} s, "
+                      f"ETA {elapsed / done * (total - done):5.0f} s", end="", file=sys.stderr, flush=True)
+            rows = pending.get()
+    print(file=sys.stderr)
+    return rows
+
+
+def sweep_thresholds(thresholds: list[float], episodes: int, delays: list[float], workers: int,
+                     seed: int) -> tuple[float | None, list[dict]]:
+    """The paper's choice: the threshold with the best reach rate among those with zero crashes
+    (over every traffic level and delay)."""
+    tests = [TTCTest("ttc", level, d, episodes, seed + i, thr, None)
+             for thr in thresholds for i, (level, d) in enumerate((lv, d) for lv in TRAFFIC_LEVELS for d in delays)]
+    rows = _run_all(tests, workers, "ttc sweep")
+    best, best_reach = None, -1.0
+    for thr in thresholds:
+        mine = [r for r in rows if r["threshold_s"] == thr]
+        crashes = sum(r["crash_rate"] * r["episodes"] for r in mine)
+        reach = sum(r["goal_rate"] * r["episodes"] for r in mine) / sum(r["episodes"] for r in mine)
+        if crashes == 0 and reach > best_reach:
+            best, best_reach = thr, reach
+    return best, rows
+
+
+def run_comparison(checkpoint: str | None, threshold_s: float, episodes: int, delays: list[float],
+                   workers: int, seed: int, out_dir: Path, command: str) -> dict:
+    from crossway.plot import plot_curves
+
+    drivers = ["ttc"] + (["policy"] if checkpoint is not None else [])
+    if checkpoint is not None:
+        from evaluation.policy import load_policy
+
+        load_policy(checkpoint)
+    tests = [TTCTest(driver, level, d, episodes, seed + 100 * j + i, threshold_s, checkpoint)
+             for driver in drivers
+             for j, level in enumerate(TRAFFIC_LEVELS) for i, d in enumerate(delays)]
+    started = time.monotonic()
+    rows = _run_all(tests, workers, "ttc comparison")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    csv_path = out_dir / "ttc-comparison.csv"
+    with open(csv_path, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    pictures = []
+    for metric, title in (("goal_rate", "Reaches"), ("time_over_rate", "Time-overs")):
+        series = []
+        for driver in drivers:
+            for level in TRAFFIC_LEVELS:
+                mine = sorted((r for r in rows if r["driver"] == driver and r["level"] == level),
+                              key=lambda r: r["delay_max_s"])
+                name = f"{'TTC' if driver == 'ttc' else 'learned'} ({level})"
+                series.append((name, [r["delay_max_s"] for r in mine], [r[metric] for r in mine]))
+        path = out_dir / f"ttc-{metric.replace('_rate', '')}.png"
+        plot_curves(series, path, f"{title} against traffic delay_max (TTC threshold {threshold_s:g} s)",
+                    "traffic delay_max [s]", f"{title.lower()} (fraction)", (0.0, 1.0))
+        pictures.append(path)
+    meta = {"checkpoint": checkpoint, "threshold_s": threshold_s, "episodes_per_cell": episodes, "delays_max_s": delays,
+            "levels": TRAFFIC_LEVELS, "seed": seed, "wall_s": round(time.monotonic() - started, 1), "command": command}
+    json_path = out_dir / "ttc-comparison.json"
+    json_path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
+    return {"rows": rows, "paths": [json_path, csv_path, *pictures], "meta": meta}
