@@ -109,12 +109,10 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
                      out_dir, command: str) -> dict:
     """The whole test in parallel workers; writes JSON, CSV and Markdown into ``out_dir``."""
     import json
-    import multiprocessing
-    import queue
-    import sys
     import time
     from pathlib import Path
 
+    from evaluation.parallel import run_parallel
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
@@ -125,26 +123,8 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     workers = max(1, min(workers, episodes))
     shares = [episodes // workers + (i < episodes % workers) for i in range(workers)]
     started = time.monotonic()
-    context = multiprocessing.get_context("spawn")
-    with context.Manager() as manager:
-        progress = manager.Queue()
-        with context.Pool(processes=workers) as pool:
-            pending = pool.starmap_async(run_episodes, [(spec.name, checkpoint, n, seed + 1000 * i, progress)
-                                                        for i, n in enumerate(shares)])
-            done, shown = 0, -1.0
-            while not pending.ready() or not progress.empty():
-                try:
-                    done += progress.get(timeout=0.5)
-                except queue.Empty:
-                    continue
-                elapsed = time.monotonic() - started
-                if elapsed - shown < 0.5 and done < episodes:
-                    continue  # at most two progress updates a second
-                shown = elapsed
-                print(f"\rright-of-way {spec.name}: {done}/{episodes} episodes, {elapsed:5.0f} s, "
-                      f"ETA {elapsed / done * (episodes - done):5.0f} s", end="", file=sys.stderr, flush=True)
-            parts = pending.get()
-    print(file=sys.stderr)
+    jobs = [(spec.name, checkpoint, n, seed + 1000 * i) for i, n in enumerate(shares)]
+    parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}")
     clean = sum(p["no_infraction"] for p in parts)
     end_reasons: dict[str, int] = {}
     for part in parts:

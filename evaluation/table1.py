@@ -10,13 +10,12 @@ average speed, each averaged over the tests.
 from __future__ import annotations
 
 import json
-import multiprocessing
-import queue
-import sys
 import time
 from collections import Counter, defaultdict
 from dataclasses import dataclass
 from pathlib import Path
+
+from evaluation.parallel import run_parallel
 
 SIGNS = ("none", "yield", "stop")
 OUTCOMES = ("goal", "crash", "off_path", "time_over")
@@ -152,28 +151,8 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
         load_policy(checkpoint)  # refuse a bad checkpoint before starting workers
     tests = [TestSpec(spec.name, d, episodes, seed + i, checkpoint)
              for i, d in enumerate(delay_schedule(spec.episodes.delay_max_s))]
-    total = episodes * len(tests)
     started = time.monotonic()
-    context = multiprocessing.get_context("spawn")
-    with context.Manager() as manager:
-        progress = manager.Queue()
-        with context.Pool(processes=min(workers, len(tests))) as pool:
-            pending = pool.starmap_async(run_test, [(t, progress) for t in tests])
-            done, shown = 0, -1.0
-            while not pending.ready() or not progress.empty():
-                try:
-                    done += progress.get(timeout=0.5)
-                except queue.Empty:
-                    continue
-                elapsed = time.monotonic() - started
-                if elapsed - shown < 0.5 and done < total:
-                    continue  # at most two progress updates a second
-                shown = elapsed
-                eta = elapsed / max(done, 1) * (total - done)
-                print(f"\rtable1 {spec.name}: {done}/{total} episodes, {elapsed:5.0f} s, ETA {eta:5.0f} s",
-                      end="", file=sys.stderr, flush=True)
-            results = pending.get()
-    print(file=sys.stderr)
+    results = run_parallel(run_test, [(t,) for t in tests], episodes * len(tests), workers, f"table1 {spec.name}")
     table = summarise(results)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
             "delays_max_s": [t.delay_max_s for t in tests], "seed": seed, "workers": workers,

@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import csv
 import json
-import multiprocessing
-import queue
-import sys
 import time
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
+
+from evaluation.parallel import run_parallel
 
 TRAFFIC_LEVELS = {"low": 4, "medium": 8, "high": 12}
 SIGNS = (("south", "stop"), ("east", "none"), ("west", "none"), ("north", "none"))
@@ -79,28 +78,7 @@ def run_ttc_test(test: TTCTest, progress=None) -> dict:
 
 
 def _run_all(tests: list[TTCTest], workers: int, label: str) -> list[dict]:
-    total = sum(t.episodes for t in tests)
-    started = time.monotonic()
-    context = multiprocessing.get_context("spawn")
-    with context.Manager() as manager:
-        progress = manager.Queue()
-        with context.Pool(processes=max(1, min(workers, len(tests)))) as pool:
-            pending = pool.starmap_async(run_ttc_test, [(t, progress) for t in tests])
-            done, shown = 0, -1.0
-            while not pending.ready() or not progress.empty():
-                try:
-                    done += progress.get(timeout=0.5)
-                except queue.Empty:
-                    continue
-                elapsed = time.monotonic() - started
-                if elapsed - shown < 0.5 and done < total:
-                    continue
-                shown = elapsed
-                print(f"\r{label}: {done}/{total} episodes, {elapsed:5.0f} s, "
-                      f"ETA {elapsed / done * (total - done):5.0f} s", end="", file=sys.stderr, flush=True)
-            rows = pending.get()
-    print(file=sys.stderr)
-    return rows
+    return run_parallel(run_ttc_test, [(t,) for t in tests], sum(t.episodes for t in tests), workers, label)
 
 
 def sweep_thresholds(thresholds: list[float], episodes: int, delays: list[float], workers: int,
