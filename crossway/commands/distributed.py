@@ -27,6 +27,21 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                         help="Zenoh session mode (client: through a router)")
 
 
+def _add_tls(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("mutual TLS (tls/HOST:PORT endpoints; deploy/make-certs.sh makes a dev set)")
+    group.add_argument("--tls-root-ca", default="", metavar="PEM", help="CA certificate that signs every party")
+    group.add_argument("--tls-cert", default="", metavar="PEM", help="this process's certificate")
+    group.add_argument("--tls-key", default="", metavar="PEM", help="this process's private key")
+
+
+def _transport(args, listen: tuple[str, ...], connect: tuple[str, ...], mode: str | None = None):
+    from protocol.transport import TransportConfig
+
+    return TransportConfig(mode=mode or args.mode, listen=listen, connect=connect,
+                           tls_root_ca=getattr(args, "tls_root_ca", ""), tls_certificate=getattr(args, "tls_cert", ""),
+                           tls_private_key=getattr(args, "tls_key", ""))
+
+
 def _add_learner_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--learning-rate", type=float, default=2.5e-4, help="Adam step size of the global network")
     parser.add_argument("--sigma-decay-steps", type=int, default=5_000_000,
@@ -59,6 +74,7 @@ def add_parser(subparsers) -> None:
     learner.add_argument("--connect", default="", help="comma-separated endpoints to connect to (e.g. a router)")
     _add_common(learner)
     _add_learner_options(learner)
+    _add_tls(learner)
     learner.set_defaults(func=run_learner_command)
 
     actor = subparsers.add_parser(
@@ -73,7 +89,17 @@ def add_parser(subparsers) -> None:
     actor.add_argument("--lanes", default="", help="comma-separated entry lanes that host agents (default: all)")
     _add_common(actor)
     _add_actor_options(actor)
+    _add_tls(actor)
     actor.set_defaults(func=run_actor_command)
+
+    router = subparsers.add_parser(
+        "router", help="run a Zenoh router (learner and actors connect to it as clients)", formatter_class=fmt,
+        description="A Zenoh router from the Python package (zenohd itself is not on the package registries): "
+                    "start it where every machine can reach it, then run the learner and the actors with "
+                    "--mode client --connect tcp/ROUTER:7447. Stops on Ctrl-C or SIGTERM.")
+    router.add_argument("--listen", default="tcp/0.0.0.0:7447", help="comma-separated endpoints to listen on")
+    _add_tls(router)
+    router.set_defaults(func=run_router_command)
 
     train = subparsers.add_parser(
         "train", help="train on this machine: a learner and N actors", formatter_class=fmt,
@@ -101,15 +127,13 @@ def add_parser(subparsers) -> None:
 def learner_config(args, listen: tuple[str, ...], connect: tuple[str, ...]):
     from learner.core import LearnerConfig
     from learner.service import LearnerServiceConfig
-    from protocol.transport import TransportConfig
 
     if args.learning_rate <= 0 or args.sigma_decay_steps < 0 or args.max_staleness < 0:
         raise ValueError("--learning-rate must be > 0, --sigma-decay-steps and --max-staleness >= 0")
     if args.metrics_port < 0 or args.metrics_port > 65535:
         raise ValueError(f"--metrics-port must be 0-65535, got {args.metrics_port}")
     return LearnerServiceConfig(
-        run_dir=args.run_dir, run_name=args.run_name,
-        transport=TransportConfig(mode=args.mode, listen=listen, connect=connect),
+        run_dir=args.run_dir, run_name=args.run_name, transport=_transport(args, listen, connect),
         metrics_port=args.metrics_port, checkpoint_interval_s=args.checkpoint_interval,
         learner=LearnerConfig(learning_rate=args.learning_rate, sigma_decay_agent_steps=args.sigma_decay_steps,
                               max_staleness=args.max_staleness),
@@ -120,7 +144,6 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
                  delay_max: float | None):
     from actors.worker import ActorServiceConfig
     from algo.d_a3c import DA3CConfig
-    from protocol.transport import TransportConfig
     from simcore.scenario import load_scenario
     from simcore.simulator import SimConfig
 
@@ -129,8 +152,8 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         raise ValueError(f"--update-interval must be >= 1, got {args.update_interval}")
     sim = SimConfig(lanes=lanes, delay_max_s=delay_max, delay_min_s=0.0 if delay_max is not None else None)
     return ActorServiceConfig(
-        scenario=args.scenario, run_name=args.run_name,
-        transport=TransportConfig(mode=args.mode, connect=connect), actor_id=actor_id, seed=seed, sim=sim,
+        scenario=args.scenario, run_name=args.run_name, transport=_transport(args, (), connect),
+        actor_id=actor_id, seed=seed, sim=sim,
         da3c=DA3CConfig(update_interval=args.update_interval),
     )
 
@@ -148,6 +171,22 @@ def run_actor_command(args) -> int:
 
     lanes = tuple(x for x in args.lanes.split(",") if x) or None
     return run_actor(actor_config(args, parse_endpoints(args.connect), lanes, args.seed, args.id, args.delay_max))
+
+
+def run_router_command(args) -> int:
+    import threading
+
+    from protocol.transport import open_session, parse_endpoints
+
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    listen = parse_endpoints(args.listen)
+    with open_session(_transport(args, listen, (), mode="router")) as session:
+        print(f"router: {session.zid()} listening on {list(listen)}", file=sys.stderr, flush=True)
+        stop.wait()
+    print("router: stopped", file=sys.stderr)
+    return 0
 
 
 # -- local launcher ------------------------------------------------------------------------------
