@@ -110,6 +110,7 @@ class LearnerService:
         self._queue: queue.Queue[bytes] = queue.Queue(maxsize=config.queue_size)
         self._stop = threading.Event()
         self._live_actors: set[str] = set()
+        self._actor_events: deque[str] = deque(maxlen=1000)  # joins and leaves, logged by the main thread
         self._episodes = 0
         self._rejected = 0
         self.pushes_by_actor: dict[str, int] = {}  # applied pushes per actor id (tests, logs)
@@ -133,8 +134,10 @@ class LearnerService:
         actor = keys.actor_id_from_key(str(sample.key_expr))
         if sample.kind == zenoh.SampleKind.PUT:
             self._live_actors.add(actor)
+            self._actor_events.append(f"actor {actor} joined")
         else:
             self._live_actors.discard(actor)
+            self._actor_events.append(f"actor {actor} left")
         self.metrics.live_actors.set(len(self._live_actors))
 
     # -- main thread ------------------------------------------------------------------------------
@@ -236,6 +239,8 @@ class LearnerService:
                     if payload is not None:
                         self.handle_push(payload)
                     self.metrics.queue_depth.set(self._queue.qsize())
+                    while self._actor_events:
+                        self.log(f"learner: {self._actor_events.popleft()} ({len(self._live_actors)} live)")
                     now = time.monotonic()
                     while (query := queryable.try_recv()) is not None:
                         query.reply(keys.weights(run), self.weights_payload())
