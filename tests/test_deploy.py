@@ -111,3 +111,58 @@ def test_a_real_prometheus_reads_the_learners_metrics(live_learner, tmp_path):
     finally:
         server.terminate()
         server.wait(timeout=30)
+
+
+def test_compose_topology_as_processes_survives_a_learner_restart(tmp_path):
+    """Router, learner and actor as in deploy/docker-compose.yml, but as plain processes."""
+    import signal
+    import sys
+
+    from protocol import keys
+    from protocol.messages import decode
+    from protocol.transport import open_session
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    run_dir = tmp_path / "runs" / "easy"
+
+    def crossway(*args):
+        return subprocess.Popen([sys.executable, "-m", "crossway", *args], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE, text=True)
+
+    def learner():
+        return crossway("learner", "--mode", "client", "--connect", endpoint, "--listen", "", "--run-dir", str(run_dir),
+                        "--metrics-port", "0", "--checkpoint-interval", "3600")
+
+    router = crossway("router", "--listen", endpoint)
+    time.sleep(1.5)
+    first = learner()
+    actor = crossway("actor", "--mode", "client", "--connect", endpoint, "--scenario", "easy", "--delay-max", "0.5",
+                     "--update-interval", "10", "--seed", "3")
+    statuses = []
+    try:
+        with open_session(TransportConfig(mode="client", connect=(endpoint,))) as session:
+            session.declare_subscriber(keys.status("default"), lambda s: statuses.append(decode(s.payload.to_bytes())))
+            deadline = time.monotonic() + 120
+            while time.monotonic() < deadline and not (statuses and statuses[-1].version >= 6):
+                time.sleep(0.5)
+            assert statuses and statuses[-1].version >= 6, "no training through the router"
+            first.send_signal(signal.SIGTERM)
+            _, log = first.communicate(timeout=60)
+            stopped_at = int(log.rsplit("stopped at version ", 1)[1].split(";")[0])
+            statuses.clear()
+            second = learner()
+            try:
+                deadline = time.monotonic() + 120
+                while time.monotonic() < deadline and not (statuses and statuses[-1].version >= stopped_at + 3):
+                    time.sleep(0.5)
+                assert statuses and statuses[-1].version >= stopped_at + 3, "no training after the restart"
+                assert min(s.version for s in statuses) >= stopped_at
+            finally:
+                second.send_signal(signal.SIGTERM)
+                _, log = second.communicate(timeout=60)
+            assert f"at version {stopped_at}" in log
+    finally:
+        for process in (actor, first, router):
+            if process.poll() is None:
+                process.send_signal(signal.SIGTERM)
+                process.wait(timeout=60)
