@@ -166,3 +166,15 @@ def test_compose_topology_as_processes_survives_a_learner_restart(tmp_path):
             if process.poll() is None:
                 process.send_signal(signal.SIGTERM)
                 process.wait(timeout=60)
+
+
+def test_dockerfile_copies_what_exists_and_runs_crossway():
+    root = DEPLOY.parent
+    text = (root / "Dockerfile").read_text()
+    sources = [line.split()[1] for line in text.splitlines() if line.startswith("COPY ") and "--from" not in line]
+    for source in sources:
+        assert (root / source).exists(), source
+    packages = {"simcore", "algo", "protocol", "actors", "learner", "evaluation", "crossway"}
+    assert packages <= set(sources)  # every package the console script needs
+    assert 'ENTRYPOINT ["crossway"]' in text
+    assert '"torch==2.13.0"' in text and "TORCH_INDEX_URL" in text  # CPU torch, index switchable
