@@ -1,7 +1,6 @@
 """Learner and actors over real Zenoh sessions on loopback (multicast scouting off, explicit
 endpoints): weights out, gradients in, actors dying, the learner restarting, the CLI."""
 
-import os
 import signal
 import socket
 import subprocess
@@ -132,7 +131,7 @@ def test_a_restarted_learner_resumes_its_version_and_actors_rejoin(tmp_path):
             finally:
                 second.send_signal(signal.SIGTERM)
                 _, log = second.communicate(timeout=60)
-            assert f"resumed from" in log and f"at version {stopped_at}" in log
+            assert "resumed from" in log and f"at version {stopped_at}" in log
         finally:
             stop(actor)
             stop(first)
