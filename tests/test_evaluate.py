@@ -105,3 +105,11 @@ def test_ttc_sweep_reports_and_rejects_bad_input(tmp_path):
     # with an unreachable threshold the ego never goes: no crash, so 1000 s is chosen
     assert swept.returncode == 0, swept.stderr
     assert "sweep: chose 1000 s" in swept.stdout
+
+
+def test_evaluation_is_reproducible_from_its_seed(tmp_path):
+    from evaluation.table1 import TestSpec, run_test
+
+    spec = TestSpec("easy", 10.0, 5, seed=7, checkpoint=None)
+    assert run_test(spec) == run_test(spec)
+    assert run_test(spec) != run_test(TestSpec("easy", 10.0, 5, seed=8, checkpoint=None))
