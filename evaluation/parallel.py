@@ -8,6 +8,8 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 
+BAR_WIDTH = 30  # characters of the progress bar
+
 
 def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers: int, label: str) -> list:
     """``function(*job, progress)`` for every job in ``workers`` spawned processes.
@@ -32,7 +34,9 @@ def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers:
                 if elapsed - shown < 0.5 and done < total:
                     continue
                 shown = elapsed
-                print(f"\r{label}: {done}/{total} episodes, {elapsed:5.0f} s, "
+                filled = int(BAR_WIDTH * done / max(total, 1))
+                bar = "#" * filled + "-" * (BAR_WIDTH - filled)
+                print(f"\r{label} [{bar}] {done}/{total} episodes, {elapsed:5.0f} s, "
                       f"ETA {elapsed / done * (total - done):5.0f} s", end="", file=sys.stderr, flush=True)
             results = pending.get()
     print(file=sys.stderr)
