@@ -38,6 +38,17 @@ def load_policy(checkpoint: str | Path) -> Policy:
     return policy
 
 
+def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Path:
+    """Write only what evaluation needs (network sizes, weights, provenance): a small file for models/."""
+    policy = load_policy(checkpoint)
+    state = torch.load(Path(checkpoint), weights_only=False, map_location="cpu")
+    out = Path(out)
+    torch.save({"policy": policy.state_dict(), "policy_config": state["policy_config"],
+                "version": state.get("version"), "agent_steps": state.get("agent_steps"),
+                "run_id": state.get("run_id"), "note": note}, out)
+    return out
+
+
 class PolicyDriver:
     """Acts for every learner slot of a ``Simulator`` from the newest ``StepResult``."""
 

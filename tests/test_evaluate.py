@@ -113,3 +113,20 @@ def test_evaluation_is_reproducible_from_its_seed(tmp_path):
     spec = TestSpec("easy", 10.0, 5, seed=7, checkpoint=None)
     assert run_test(spec) == run_test(spec)
     assert run_test(spec) != run_test(TestSpec("easy", 10.0, 5, seed=8, checkpoint=None))
+
+
+def test_export_keeps_the_policy_and_evaluates_the_same(tmp_path):
+    from evaluation.policy import load_policy
+
+    checkpoint = tmp_path / "ckpt.pt"
+    core = LearnerCore()
+    torch.save(core.state_dict(), checkpoint)
+    result = crossway("evaluate", "export", "--checkpoint", str(checkpoint), "--out", str(tmp_path / "small.pt"),
+                      "--note", "unit test")
+    assert result.returncode == 0, result.stderr
+    small = tmp_path / "small.pt"
+    assert small.stat().st_size < 0.5 * checkpoint.stat().st_size  # no optimiser state
+    original, exported = load_policy(checkpoint), load_policy(small)
+    for (name, a), (_, b) in zip(original.state_dict().items(), exported.state_dict().items()):
+        assert torch.equal(a, b), name
+    assert torch.load(small, weights_only=False)["note"] == "unit test"

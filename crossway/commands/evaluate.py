@@ -68,6 +68,16 @@ def add_parser(subparsers) -> None:
     ttc.add_argument("--out", type=Path, default=Path("results"), help="output directory")
     ttc.set_defaults(func=run_ttc_command)
 
+    export = experiments.add_parser(
+        "export", help="copy a checkpoint's policy alone into a small file (for models/)",
+        description="Keep only the network sizes, the weights and their provenance (version, agent-steps, run "
+                    "id) of a learner checkpoint: about a third of its size, and what every evaluate "
+                    "command accepts as --checkpoint.", formatter_class=fmt)
+    export.add_argument("--checkpoint", type=Path, required=True, help="learner checkpoint")
+    export.add_argument("--out", type=Path, required=True, help="file to write, e.g. models/easy.pt")
+    export.add_argument("--note", default="", help="free text stored with the weights (how they were trained)")
+    export.set_defaults(func=run_export_command)
+
 
 def run_table1_command(args) -> int:
     from evaluation.table1 import markdown, run_table1
@@ -135,4 +145,14 @@ def run_ttc_command(args) -> int:
         print(f"{row['driver']:6s} {row['level']:6s} delay {row['delay_max_s']:5g} s: reach {row['goal_rate']:.3f} "
               f"crash {row['crash_rate']:.3f} time-over {row['time_over_rate']:.3f}")
     print("wrote " + ", ".join(str(p) for p in report["paths"]) + f" in {report['meta']['wall_s']} s")
+    return 0
+
+
+def run_export_command(args) -> int:
+    from evaluation.policy import export_policy
+
+    if not args.out.parent.is_dir():
+        raise ValueError(f"--out: directory {str(args.out.parent)!r} does not exist")
+    path = export_policy(args.checkpoint, args.out, args.note)
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
     return 0
