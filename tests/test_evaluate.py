@@ -118,8 +118,11 @@ def test_evaluation_is_reproducible_from_its_seed(tmp_path):
 def test_export_keeps_the_policy_and_evaluates_the_same(tmp_path):
     from evaluation.policy import load_policy
 
+    import numpy as np
+
     checkpoint = tmp_path / "ckpt.pt"
     core = LearnerCore()
+    core.apply({n: np.ones(s, np.float32) for n, s in core.shapes.items()}, 0, 10)  # Adam state exists now
     torch.save(core.state_dict(), checkpoint)
     result = crossway("evaluate", "export", "--checkpoint", str(checkpoint), "--out", str(tmp_path / "small.pt"),
                       "--note", "unit test")
