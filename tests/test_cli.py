@@ -39,3 +39,20 @@ def test_bench_bad_input(args, message):
     assert result.returncode == 2
     assert message in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_bench_actor_and_learner_print_json():
+    actor = crossway("bench", "actor", "--scenario", "easy", "--seconds", "2", "--update-interval", "5", "--json",
+                     timeout=180)
+    assert actor.returncode == 0, actor.stderr
+    report = json.loads(actor.stdout)
+    assert report["agent_steps_per_s"] > 0 and report["bare_forward_backward_samples_per_s"] > 0
+    assert report["ratio_to_bare"] == pytest.approx(
+        report["agent_steps_per_s"] / report["bare_forward_backward_samples_per_s"], rel=0.01)
+    assert report["peak_rss_bytes"] > 0
+    learner = crossway("bench", "learner", "--seconds", "3", "--json", timeout=180)
+    assert learner.returncode == 0, learner.stderr
+    report = json.loads(learner.stdout)
+    assert report["pushes_applied_per_s"] > 0
+    assert report["rejected"] == 0
+    assert report["rss_max_bytes"] >= report["rss_start_bytes"] > 0
