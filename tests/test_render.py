@@ -287,3 +287,19 @@ def test_mp4_output(tmp_path):
                             "-show_entries", "stream=nb_read_frames", "-of", "csv=p=0", str(out)],
                            capture_output=True, text=True)
     assert probe.stdout.strip() == "6"
+
+
+def test_render_drives_with_a_checkpoint(tmp_path):
+    import torch
+
+    from learner.core import LearnerCore
+
+    checkpoint = tmp_path / "ckpt.pt"
+    torch.save(LearnerCore().state_dict(), checkpoint)
+    out = tmp_path / "trained.gif"
+    result = subprocess.run([sys.executable, "-m", "crossway", "render", "--scenario", "easy", "--steps", "3",
+                             "--checkpoint", str(checkpoint), "--out", str(out), "--pixels-per-m", "2"],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    with Image.open(out) as image:
+        assert image.n_frames == 3

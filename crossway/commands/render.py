@@ -20,6 +20,7 @@ examples:
   crossway render --scenario hard --steps 300 --out run.gif
   crossway render --scenario medium --steps 600 --delay-max 10 --focus south_0 --out south.mp4
   crossway render --scenario my_junction.toml --steps 200 --pixels-per-m 4 --out small.gif
+  crossway render --scenario easy --checkpoint runs/easy/checkpoints/ckpt-000009000.pt --out trained.gif
 """
 
 
@@ -75,6 +76,11 @@ def add_parser(subparsers) -> None:
         help="scale of the junction view [pixels per metre], 0.5 to 20; the hard junction is "
              "136 m across, so 6 gives an 816 px square (plus the views panel). A GIF holds "
              "about one byte per pixel per frame in memory until it is written (default: 6)")
+    parser.add_argument(
+        "--checkpoint", default=None, metavar="CKPT",
+        help="drive every car with this trained policy (a learner checkpoint or an exported "
+             "policy) instead of the scripted driver; cars take the Gaussian mean (default: "
+             "scripted driver)")
     parser.set_defaults(func=run)
 
 
@@ -107,14 +113,19 @@ def run(args) -> int:
     config = SimConfig(delay_min_s=None if args.delay_max is None else 0.0, delay_max_s=args.delay_max)
     sim = Simulator(args.scenario, config, seed=args.seed)
     focus = choose_focus(sim, None, args.focus)  # refuses a bad --focus before simulating
-    driver = ScriptedDriver(sim)
+    if args.checkpoint is not None:
+        from evaluation.policy import PolicyDriver, load_policy
+
+        policy = PolicyDriver(sim, load_policy(args.checkpoint))  # refuses a bad checkpoint now
+    else:
+        scripted = ScriptedDriver(sim)
     reasons: Counter[str] = Counter()
 
     def frames():
         nonlocal focus
-        sim.reset()
+        result = sim.reset()
         for step in range(1, args.steps + 1):
-            result = sim.step(driver.act())
+            result = sim.step(policy.act(result) if args.checkpoint is not None else scripted.act())
             reasons.update(e.end_reason for e in result.episodes)
             focus = choose_focus(sim, focus, args.focus)
             yield render_frame(sim, result, focus, args.pixels_per_m, episodes=reasons)
