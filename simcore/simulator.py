@@ -310,11 +310,11 @@ class Simulator:
             self.speed[idx] = np.minimum(self.speed[idx], self.target_speed[idx])
             self.steps[idx] += 1
             self.speed_sum[idx] += self.speed[idx]
-        traffic_idx = k + np.flatnonzero(self.present[k:])
+        traffic_idx = k + np.flatnonzero(self.present[k:]) if self.num_traffic else idx[:0]
         self._drive_traffic(traffic_idx)
         self.time_s += DT
         self._localise(idx)
-        moving = np.concatenate([idx, traffic_idx])
+        moving = np.concatenate([idx, traffic_idx]) if len(traffic_idx) else idx
         reasons_all, crashed_into_higher_all = self._detect_ends(moving)
         reasons, crashed_into_higher = reasons_all[: len(idx)], crashed_into_higher_all[: len(idx)]
         self._reward(idx, reasons, crashed_into_higher, result)
@@ -568,8 +568,12 @@ class Simulator:
         if self.renderer is None or len(idx) == 0:
             return
         # every car on the road is drawn, traffic included; the egos are the learners in ``idx``
-        cars = np.union1d(idx, self.num_slots + np.flatnonzero(self.present[self.num_slots:]))
-        higher = self.priorities(cars)[np.searchsorted(cars, idx)]
+        if self.num_traffic:
+            cars = np.union1d(idx, self.num_slots + np.flatnonzero(self.present[self.num_slots:]))
+            higher = self.priorities(cars)[np.searchsorted(cars, idx)]
+        else:
+            cars = idx
+            higher = self.priorities(idx)
         shades = np.zeros((len(idx), self.num_vehicles + 1), dtype=np.uint8)
         labels = cars + 1
         shades[:, labels] = np.where(higher, HIGHER_PRIORITY, EGO_OR_LOWER)
