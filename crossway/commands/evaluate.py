@@ -23,14 +23,8 @@ def add_parser(subparsers) -> None:
                     "training delay_max (3 tests for easy, 5 for medium, 10 for hard), each of --episodes "
                     "episodes, run in parallel worker processes; results per traffic sign averaged over "
                     "the tests.", formatter_class=fmt)
-    table1.add_argument("--checkpoint", type=Path, help="learner checkpoint (runs/NAME/checkpoints/ckpt-*.pt)")
-    table1.add_argument("--scripted", action="store_true",
-                        help="drive with the scripted driver instead of a checkpoint (a reference, and for smoke runs)")
-    table1.add_argument("--scenario", default="easy", help="easy, medium, hard or a TOML path")
-    table1.add_argument("--episodes", type=int, default=3000, help="episodes per test (the paper: 3000)")
-    table1.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes")
-    table1.add_argument("--seed", type=int, default=0, help="test i uses seed + i")
-    table1.add_argument("--out", type=Path, default=Path("results"), help="output directory")
+    _add_policy_options(table1, scripted=True, scenario=True)
+    _add_run_options(table1, episodes=3000, episodes_help="episodes per test (the paper: 3000)")
     table1.set_defaults(func=run_table1_command)
 
     rules = experiments.add_parser(
@@ -40,13 +34,8 @@ def add_parser(subparsers) -> None:
                     "infraction is a car entering a conflict area before a car with priority over it that also "
                     "crosses it (docs/evaluation.md). Episodes are split over worker processes.",
         formatter_class=fmt)
-    rules.add_argument("--checkpoint", type=Path, help="learner checkpoint")
-    rules.add_argument("--scripted", action="store_true", help="drive with the scripted driver instead")
-    rules.add_argument("--scenario", default="easy", help="easy, medium, hard or a TOML path")
-    rules.add_argument("--episodes", type=int, default=9000, help="episodes (the paper: 9000)")
-    rules.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes")
-    rules.add_argument("--seed", type=int, default=0, help="random seed")
-    rules.add_argument("--out", type=Path, default=Path("results"), help="output directory")
+    _add_policy_options(rules, scripted=True, scenario=True)
+    _add_run_options(rules, episodes=9000, episodes_help="episodes (the paper: 9000)")
     rules.set_defaults(func=run_right_of_way_command)
 
     ttc = experiments.add_parser(
@@ -57,15 +46,12 @@ def add_parser(subparsers) -> None:
                     "same seeds; writes a CSV, a JSON and the two figures (reaches, time-overs). With "
                     "--sweep it first picks the threshold: the best reach rate with zero crashes.",
         formatter_class=fmt)
-    ttc.add_argument("--checkpoint", type=Path, help="learner checkpoint (without it only the TTC agent runs)")
+    _add_policy_options(ttc, scripted=False, scenario=False)
     ttc.add_argument("--threshold", type=float, default=6.0, help="TTC threshold [s] (ignored with --sweep)")
     ttc.add_argument("--sweep", default="", metavar="T1,T2,...",
                      help="comma-separated thresholds [s] to sweep first; the best zero-crash one is used")
-    ttc.add_argument("--episodes", type=int, default=200, help="ego episodes per (level, delay) cell")
     ttc.add_argument("--delays", default="20,40,60,80,100", help="comma-separated traffic delay_max values [s]")
-    ttc.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes")
-    ttc.add_argument("--seed", type=int, default=0, help="random seed")
-    ttc.add_argument("--out", type=Path, default=Path("results"), help="output directory")
+    _add_run_options(ttc, episodes=200, episodes_help="ego episodes per (level, delay) cell")
     ttc.set_defaults(func=run_ttc_command)
 
     export = experiments.add_parser(
@@ -79,15 +65,39 @@ def add_parser(subparsers) -> None:
     export.set_defaults(func=run_export_command)
 
 
-def run_table1_command(args) -> int:
-    from evaluation.table1 import markdown, run_table1
+def _add_policy_options(parser, scripted: bool, scenario: bool) -> None:
+    if scripted:
+        parser.add_argument("--checkpoint", type=Path, help="learner checkpoint or exported policy")
+        parser.add_argument("--scripted", action="store_true",
+                            help="drive with the scripted driver instead of a checkpoint (a reference; smoke runs)")
+    else:
+        parser.add_argument("--checkpoint", type=Path,
+                            help="learner checkpoint or exported policy (without it only the TTC agent runs)")
+    if scenario:
+        parser.add_argument("--scenario", default="easy", help="easy, medium, hard or a TOML path")
 
-    if (args.checkpoint is None) == (not args.scripted):
+
+def _add_run_options(parser, episodes: int, episodes_help: str) -> None:
+    parser.add_argument("--episodes", type=int, default=episodes, help=episodes_help)
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (each worker derives its own)")
+    parser.add_argument("--out", type=Path, default=Path("results"), help="output directory")
+
+
+def _checked(args) -> str | None:
+    """The checkpoint to evaluate (None: scripted); refuses contradictory or empty budgets."""
+    if getattr(args, "scripted", None) is not None and (args.checkpoint is None) == (not args.scripted):
         raise ValueError("give either --checkpoint CKPT or --scripted")
     if args.episodes < 1 or args.workers < 1:
         raise ValueError("--episodes and --workers must be >= 1")
-    report = run_table1(args.scenario, str(args.checkpoint) if args.checkpoint else None, args.episodes,
-                        args.workers, args.seed, args.out, _command_line())
+    return str(args.checkpoint) if args.checkpoint else None
+
+
+def run_table1_command(args) -> int:
+    from evaluation.table1 import markdown, run_table1
+
+    report = run_table1(args.scenario, _checked(args), args.episodes, args.workers, args.seed, args.out,
+                        _command_line())
     print(markdown(report["meta"]["scenario"], report["table"]), end="")
     print("wrote " + ", ".join(str(p) for p in report["paths"]) + f" in {report['meta']['wall_s']} s")
     return 0
@@ -100,12 +110,8 @@ def _command_line() -> str:
 def run_right_of_way_command(args) -> int:
     from evaluation.right_of_way import run_right_of_way
 
-    if (args.checkpoint is None) == (not args.scripted):
-        raise ValueError("give either --checkpoint CKPT or --scripted")
-    if args.episodes < 1 or args.workers < 1:
-        raise ValueError("--episodes and --workers must be >= 1")
-    summary = run_right_of_way(args.scenario, str(args.checkpoint) if args.checkpoint else None, args.episodes,
-                               args.workers, args.seed, args.out, _command_line())
+    summary = run_right_of_way(args.scenario, _checked(args), args.episodes, args.workers, args.seed, args.out,
+                               _command_line())
     print(summary["markdown"], end="")
     print("wrote " + ", ".join(summary["paths"]) + f" in {summary['wall_s']} s")
     return 0
@@ -124,8 +130,7 @@ def _floats(text: str, option: str) -> list[float]:
 def run_ttc_command(args) -> int:
     from evaluation.ttc_test import run_comparison, sweep_thresholds
 
-    if args.episodes < 1 or args.workers < 1:
-        raise ValueError("--episodes and --workers must be >= 1")
+    checkpoint = _checked(args)
     delays = _floats(args.delays, "--delays")
     threshold = args.threshold
     if threshold <= 0:
@@ -139,8 +144,8 @@ def run_ttc_command(args) -> int:
             raise ValueError("no swept threshold gave zero crashes; sweep higher thresholds")
         threshold = best
         print(f"sweep: chose {threshold:g} s")
-    report = run_comparison(str(args.checkpoint) if args.checkpoint else None, threshold, args.episodes, delays,
-                            args.workers, args.seed, args.out, _command_line())
+    report = run_comparison(checkpoint, threshold, args.episodes, delays, args.workers, args.seed, args.out,
+                            _command_line())
     for row in report["rows"]:
         print(f"{row['driver']:6s} {row['level']:6s} delay {row['delay_max_s']:5g} s: reach {row['goal_rate']:.3f} "
               f"crash {row['crash_rate']:.3f} time-over {row['time_over_rate']:.3f}")
