@@ -4,7 +4,8 @@ Wiring (one comment per connection):
 
 - gradients key -> bounded queue (Zenoh callback thread; full queue: drop and count)
 - queue -> decode and validate -> staleness check -> ``LearnerCore.apply`` (main thread)
-- main thread -> weights key: publication at most every ``publish_interval_s`` when changed
+- main thread -> weights key: publication at most every ``publish_interval_s`` when changed, and
+  every ``REPUBLISH_S`` regardless (congestion DROP: a dead actor link never stalls the learner)
 - weights key queryable -> main thread replies with the newest weights (actors ask on start)
 - actors' liveliness tokens -> live-actor gauge
 - main thread -> status key, about once a second (``crossway train``'s progress line)
@@ -46,6 +47,7 @@ from protocol.transport import TransportConfig, open_session
 
 CHECKPOINT_PATTERN = re.compile(r"^ckpt-(\d{9})\.pt$")
 KEEP_CHECKPOINTS = 3
+REPUBLISH_S = 5.0  # publish the weights at least this often, changed or not: rejoining actors catch up [s]
 
 
 @dataclass(frozen=True)
@@ -220,8 +222,10 @@ class LearnerService:
         self.metrics.sigma.set(self.core.sigma)
         with open_session(cfg.transport) as session:
             self.session = session
-            block = zenoh.CongestionControl.BLOCK
-            weights_publisher = session.declare_publisher(keys.weights(run), congestion_control=block)
+            # DROP, not BLOCK: one actor's dead link must not stall the learner; a lost publication
+            # is followed by the next (at most REPUBLISH_S later) and queries are answered reliably
+            weights_publisher = session.declare_publisher(keys.weights(run),
+                                                          congestion_control=zenoh.CongestionControl.DROP)
             status_publisher = session.declare_publisher(keys.status(run))
             queryable = session.declare_queryable(keys.weights(run), zenoh.handlers.FifoChannel(256))
             subscriber = session.declare_subscriber(keys.gradients(run), self._on_gradient)
@@ -245,7 +249,9 @@ class LearnerService:
                     while (query := queryable.try_recv()) is not None:
                         query.reply(keys.weights(run), self.weights_payload())
                         query.drop()
-                    if self.core.version != self._published_version and now - self._last_publish >= cfg.publish_interval_s:
+                    changed = self.core.version != self._published_version
+                    if (changed and now - self._last_publish >= cfg.publish_interval_s) or \
+                            now - self._last_publish >= REPUBLISH_S:
                         weights_publisher.put(self.weights_payload())
                         self._published_version = self.core.version
                         self._last_publish = now
