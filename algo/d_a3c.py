@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
-from torch.func import functional_call, vmap
 
-from algo.policy import ACTION_SCALE, Policy, PolicyConfig, preprocess
+from algo.policy import ACTION_SCALE, Policy, PolicyConfig
+from algo.stacked import GRID, HEADS, PATCH_FEATURES, conv1, conv1_gradients, head_after_conv1, patches
 from simcore.simulator import Simulator, StepResult
 
 LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
@@ -83,14 +83,19 @@ def stream_loss(mu: torch.Tensor, values: torch.Tensor, actions: torch.Tensor, r
 
 @dataclass
 class EpisodeLearner:
-    """An agent during one episode: local weights, the current segment and the gradient sum."""
+    """An agent during one episode: local weights, the current segment and the gradient sum.
 
-    template: Policy  # the architecture; its own parameters are not used
+    The segment keeps each observation as first-layer patches and, from acting, that layer's
+    output for both heads, so the local update replays only the rest of the network
+    (``algo.stacked``). Acting and updating use the same weights: they change only at updates.
+    """
+
     params: dict[str, torch.Tensor]  # this agent's local weights: views into ActorCore.stacked
     base_version: int
     config: DA3CConfig
-    views: np.ndarray  # [update_interval + 1, 16, 84, 84] uint8: segment observations
-    scalars: np.ndarray  # [update_interval + 1, 2] float32
+    patches: torch.Tensor  # [update_interval + 1, 441, 256] float: segment observations
+    pre1: torch.Tensor  # [2, update_interval + 1, 441, C1] float: first layer's output per head
+    scalars: np.ndarray  # [update_interval + 1, 2] float32: speed, target speed [m/s]
     actions: np.ndarray  # [update_interval, 2] float32, normalised units, unclipped samples
     rewards: np.ndarray  # [update_interval, 2] float32: R_acc, R_sa
     length: int = 0  # steps stored in the current segment
@@ -99,9 +104,15 @@ class EpisodeLearner:
     updates: int = 0
 
     def observe(self, views: np.ndarray, scalars: np.ndarray) -> None:
-        """The observation the next action is taken from."""
-        self.views[self.length] = views
+        """The observation the next action is taken from (uint8 views [16, 84, 84], speeds [2])."""
+        patches(torch.from_numpy(views), out=self.patches[self.length])
         self.scalars[self.length] = scalars
+
+    def first_layer(self, index: int) -> None:
+        """Run the first layer of both heads on observation ``index`` with the local weights."""
+        for h, head in enumerate(HEADS):
+            conv1(self.patches[index], self.params[f"{head}.conv1.weight"], self.params[f"{head}.conv1.bias"],
+                  out=self.pre1[h, index])
 
     def record(self, action: np.ndarray, reward_acc: float, reward_sa: float) -> None:
         self.actions[self.length] = action
@@ -109,15 +120,25 @@ class EpisodeLearner:
         self.length += 1
 
     def update(self, sigma: float, terminal: bool) -> None:
-        """Local D-A3C step over the stored segment; the next observation is at index ``length``."""
+        """Local D-A3C step over the stored segment; the next observation is at index ``length``.
+
+        Same gradient as autograd through ``Policy`` on the whole segment (tests check it), but
+        the first layer's forward pass comes from acting; only the bootstrap observation needs it.
+        """
         n = self.length
         if n == 0:
             return
         cfg = self.config
-        views, scalars = preprocess(self.views[: n + 1], self.scalars[: n + 1])
-        # leaves that share storage with the local weights: the step below updates them in place
-        leaves = {name: p.detach().requires_grad_(True) for name, p in self.params.items()}
-        mu_acc, v_acc, mu_sa, v_sa = functional_call(self.template, leaves, (views, scalars))
+        with torch.no_grad():
+            self.first_layer(n)  # V(s_n) bootstraps with the weights the segment was driven with
+        leaves = {name: p.detach().requires_grad_(True) for name, p in self.params.items()
+                  if ".conv1." not in name}
+        stacked = {name: leaf.unsqueeze(0) for name, leaf in leaves.items()}
+        scalars = torch.from_numpy(self.scalars[: n + 1]).unsqueeze(0)
+        pre1 = [self.pre1[h, : n + 1].detach().requires_grad_(True) for h in range(len(HEADS))]
+        (mu_acc, v_acc), (mu_sa, v_sa) = (
+            (out[0] for out in head_after_conv1(pre1[h].unsqueeze(0), scalars, stacked, head))
+            for h, head in enumerate(HEADS))
         boot_acc = 0.0 if terminal else float(v_acc[n].detach())
         boot_sa = 0.0 if terminal else float(v_sa[n].detach())
         actions = torch.from_numpy(self.actions[:n])
@@ -126,16 +147,25 @@ class EpisodeLearner:
         sa = stream_loss(mu_sa[:n], v_sa[:n], actions[:, 1], rewards[:, 1], boot_sa, cfg.gamma, sigma)
         loss = acc.policy + sa.policy + cfg.value_coef * (acc.value + sa.value)
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(list(leaves.values()), cfg.max_grad_norm)
+        grads = {name: leaf.grad for name, leaf in leaves.items()}
+        for h, head in enumerate(HEADS):
+            weight, bias = conv1_gradients(self.patches[:n], pre1[h].grad[:n],
+                                           self.params[f"{head}.conv1.weight"].shape)
+            grads[f"{head}.conv1.weight"], grads[f"{head}.conv1.bias"] = weight, bias
         with torch.no_grad():
-            for name, leaf in leaves.items():
-                self.grad_sum[name].add_(leaf.grad)
-                self.params[name].add_(leaf.grad, alpha=-cfg.local_learning_rate)
+            # clip to max_grad_norm, as torch.nn.utils.clip_grad_norm_
+            total = torch.linalg.vector_norm(torch.stack([torch.linalg.vector_norm(g) for g in grads.values()]))
+            scale = min(1.0, cfg.max_grad_norm / (float(total) + 1e-6))
+            for name, grad in grads.items():
+                if scale < 1.0:
+                    grad.mul_(scale)
+                self.grad_sum[name].add_(grad)
+                self.params[name].add_(grad, alpha=-cfg.local_learning_rate)
         self.losses += [float(acc.policy.detach()), float(sa.policy.detach()),
                         float(acc.value.detach()), float(sa.value.detach())]
         self.updates += 1
         # the last observation opens the next segment
-        self.views[0] = self.views[n]
+        self.patches[0].copy_(self.patches[n])
         self.scalars[0] = self.scalars[n]
         self.length = 0
 
@@ -151,6 +181,17 @@ class FinishedEpisode:
     mean_losses: np.ndarray  # policy acc, policy sa, value acc, value sa per update
 
 
+def _runs(slots: list[int]) -> list[tuple[int, int]]:
+    """Sorted slot numbers grouped into runs of neighbours, as [first, last) pairs."""
+    runs: list[tuple[int, int]] = []
+    for slot in slots:
+        if runs and runs[-1][1] == slot:
+            runs[-1] = (runs[-1][0], slot + 1)
+        else:
+            runs.append((slot, slot + 1))
+    return runs
+
+
 class ActorCore:
     """One simulator, every car a learner with its own local weights (transport-free)."""
 
@@ -163,19 +204,14 @@ class ActorCore:
         self.version = -1  # no weights yet
         self.sigma = 0.65
         self._rng = np.random.default_rng(seed)
-        # every slot's local weights in one tensor per parameter, [slots, ...]: agents act in one
-        # batched call over stacked parameters (torch.func.vmap) instead of one call each
+        # every slot's local weights in one tensor per parameter, [slots, ...]: neighbouring
+        # agents act in one batched call over stacked parameters instead of one call each
         self.stacked = {name: p.detach().unsqueeze(0).repeat(sim.num_slots, *([1] * p.dim())).contiguous()
                         for name, p in self.global_policy.named_parameters()}
-        self._batched_forward = vmap(self._single_forward, in_dims=(0, 0, 0))
         self._learners: list[EpisodeLearner | None] = [None] * sim.num_slots
         self._spare: list[EpisodeLearner] = []
         self._result: StepResult | None = None
         self.agent_steps = 0
-
-    def _single_forward(self, params, views, scalars):
-        mu_acc, _, mu_sa, _ = functional_call(self.global_policy, params, (views[None], scalars[None]))
-        return torch.stack([mu_acc[0], mu_sa[0]])
 
     # weights ------------------------------------------------------------------------------------
 
@@ -198,9 +234,12 @@ class ActorCore:
             learner.params = params
         else:
             n = self.config.update_interval
+            conv1_channels = self.policy_config.conv1_channels
             learner = EpisodeLearner(
-                template=self.global_policy, params=params, base_version=self.version, config=self.config,
-                views=np.zeros((n + 1, 16, 84, 84), np.uint8), scalars=np.zeros((n + 1, 2), np.float32),
+                params=params, base_version=self.version, config=self.config,
+                patches=torch.zeros(n + 1, GRID * GRID, PATCH_FEATURES),
+                pre1=torch.zeros(len(HEADS), n + 1, GRID * GRID, conv1_channels),
+                scalars=np.zeros((n + 1, 2), np.float32),
                 actions=np.zeros((n, 2), np.float32), rewards=np.zeros((n, 2), np.float32),
             )
         learner.base_version = self.version
@@ -228,25 +267,22 @@ class ActorCore:
     def means(self, active: list[int]) -> np.ndarray:
         """Gaussian means [slots, 2] of the cars on ``active`` slots, each from its own weights.
 
-        With at least half the lanes busy, all slots go through one batched call over the
-        stacked local weights (idle slots compute on zeros); otherwise each car acts alone.
+        The first layer runs per car and its output stays in the car's segment for the update;
+        the rest of the network runs once per run of neighbouring busy slots, over slices of the
+        stacked weights (views, no copy).
         """
         means = np.zeros((self.sim.num_slots, 2), np.float32)
         with torch.no_grad():
-            if 2 * len(active) >= self.sim.num_slots > 1:
-                views = np.zeros((self.sim.num_slots, 16, 84, 84), np.uint8)
-                scalars = np.zeros((self.sim.num_slots, 2), np.float32)
-                for slot in active:
-                    learner = self._learners[slot]
-                    views[slot] = learner.views[learner.length]
-                    scalars[slot] = learner.scalars[learner.length]
-                means[:] = self._batched_forward(self.stacked, *preprocess(views, scalars)).numpy()
-            else:
-                for slot in active:
-                    learner = self._learners[slot]
-                    v, s = preprocess(learner.views[learner.length][None], learner.scalars[learner.length][None])
-                    mu_acc, _, mu_sa, _ = functional_call(self.global_policy, learner.params, (v, s))
-                    means[slot] = (float(mu_acc[0]), float(mu_sa[0]))
+            for slot in active:
+                self._learners[slot].first_layer(self._learners[slot].length)
+            for first, last in _runs(active):
+                learners = [self._learners[slot] for slot in range(first, last)]
+                params = {name: weights[first:last] for name, weights in self.stacked.items()}
+                scalars = torch.from_numpy(np.stack([l.scalars[l.length] for l in learners]))[:, None]
+                for h, head in enumerate(HEADS):
+                    pre1 = torch.stack([l.pre1[h, l.length] for l in learners])[:, None]
+                    mu, _ = head_after_conv1(pre1, scalars, params, head)
+                    means[first:last, h] = mu[:, 0].numpy()
         return means
 
     def act(self) -> tuple[np.ndarray, np.ndarray]:

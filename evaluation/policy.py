@@ -11,31 +11,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from algo.policy import ACTION_SCALE, Policy, PolicyConfig, preprocess
-
-
-def load_policy(checkpoint: str | Path) -> Policy:
-    """A policy from a learner checkpoint; a clear error if the file or network does not fit."""
-    path = Path(checkpoint)
-    if not path.is_file():
-        raise ValueError(f"no checkpoint file {str(path)!r}")
-    try:
-        state = torch.load(path, weights_only=False, map_location="cpu")
-    except Exception as error:  # torch raises several types for a file that is not a checkpoint
-        raise ValueError(f"{path} is not a crossway checkpoint ({type(error).__name__}: {error})") from None
-    if not isinstance(state, dict) or "policy" not in state or "policy_config" not in state:
-        raise ValueError(f"{path} is not a crossway learner checkpoint (no policy or policy_config)")
-    try:
-        config = PolicyConfig(**state["policy_config"])
-    except TypeError as error:
-        raise ValueError(f"{path}: its network description does not match this crossway ({error})") from None
-    policy = Policy(config)
-    try:
-        policy.load_state_dict(state["policy"])
-    except RuntimeError as error:
-        raise ValueError(f"{path}: its weights do not match the network {config} ({str(error)[:200]})") from None
-    policy.eval()
-    return policy
+from algo.policy import ACTION_SCALE, Policy, load_policy, preprocess
 
 
 def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Path:

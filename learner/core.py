@@ -64,6 +64,13 @@ class LearnerCore:
         self.agent_steps += agent_steps
         return self.version
 
+    def init_weights(self, policy: Policy) -> None:
+        """Start from another policy's weights (a curriculum across scenarios); version stays 0."""
+        if asdict(policy.config) != asdict(self.policy_config):
+            raise ValueError(f"initial weights are for the network {asdict(policy.config)}, "
+                             f"not this learner's {asdict(self.policy_config)}")
+        self.policy.load_state_dict(policy.state_dict())
+
     def weights(self) -> dict[str, np.ndarray]:
         return {name: p.detach().numpy().copy() for name, p in self.policy.named_parameters()}
 

@@ -30,6 +30,7 @@ from pathlib import Path
 import torch
 import zenoh
 
+from algo.policy import load_policy
 from learner.core import LearnerConfig, LearnerCore, StaleGradient
 from learner.metrics import LearnerMetrics
 from protocol import keys
@@ -65,6 +66,7 @@ class LearnerServiceConfig:
     learner: LearnerConfig = LearnerConfig()
     max_updates: int = 0  # stop after this many updates (0: run until signalled)
     torch_threads: int = 1
+    init_from: Path | None = None  # weights for a new run (checkpoint or exported policy); unused on resume
 
 
 def newest_checkpoint(run_dir: Path) -> Path | None:
@@ -109,6 +111,9 @@ class LearnerService:
             self.core.load_state_dict(state)
             self.run_id = state.get("run_id", self.run_id)
             self.log(f"learner: resumed from {checkpoint} at version {self.core.version}")
+        elif config.init_from is not None:
+            self.core.init_weights(load_policy(config.init_from))
+            self.log(f"learner: new run starting from the weights in {config.init_from}")
         self._queue: queue.Queue[bytes] = queue.Queue(maxsize=config.queue_size)
         self._stop = threading.Event()
         self._live_actors: set[str] = set()

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from algo.d_a3c import ActorCore, DA3CConfig, gaussian_log_prob, n_step_returns, stream_loss
+from algo.d_a3c import ActorCore, DA3CConfig, EpisodeLearner, gaussian_log_prob, n_step_returns, stream_loss
 from algo.policy import Policy, preprocess, sigma_at
+from algo.stacked import HEADS, conv1, head_after_conv1, patches
 from learner.core import LearnerConfig, LearnerCore, StaleGradient
 from simcore.simulator import SimConfig, Simulator
 
@@ -122,18 +123,93 @@ def test_agents_hold_their_own_weights_and_batched_acting_matches_one_by_one():
     core = ActorCore(sim, config=DA3CConfig(update_interval=3), seed=3)
     core.set_weights(0, 0.3, LearnerCore().weights())
     core.reset()
+    observations = {}
     for _ in range(7):
         core.step()
+        observations.update({slot: (core._result.views[slot].copy(), core._result.scalars[slot].copy())
+                             for slot in np.flatnonzero(core._result.observed)})
     # after local updates on different data the slots' weights differ
     first = core.stacked["acc.hidden.weight"]
     assert not torch.equal(first[0], first[1])
     active = [slot for slot, learner in enumerate(core._learners) if learner is not None]
     assert len(active) == 4
-    batched = core.means(active)  # all four lanes busy: one vmap call
+    batched = core.means(active)  # all four lanes busy: one batched call
     one_by_one = np.zeros_like(batched)
     for slot, learner in enumerate(core._learners):
-        views, scalars = preprocess(learner.views[learner.length][None], learner.scalars[learner.length][None])
+        views, scalars = preprocess(observations[slot][0][None], observations[slot][1][None])
         with torch.no_grad():
             mu_acc, _, mu_sa, _ = torch.func.functional_call(core.global_policy, learner.params, (views, scalars))
         one_by_one[slot] = (float(mu_acc[0]), float(mu_sa[0]))
     np.testing.assert_allclose(batched, one_by_one, atol=1e-5)
+    # and a run with a gap (slot 1 idle) gives the same means for the others
+    gapped = core.means([0, 2, 3])
+    np.testing.assert_allclose(gapped[[0, 2, 3]], one_by_one[[0, 2, 3]], atol=1e-5)
+    assert not gapped[1].any()
+
+
+def test_matrix_form_of_the_network_matches_the_modules():
+    torch.manual_seed(0)
+    policy = Policy()
+    raw = np.random.default_rng(0).integers(0, 256, (3, 16, 84, 84), dtype=np.uint8)
+    speeds = np.array([[1.0, 8.0], [5.0, 8.0], [9.5, 10.0]], np.float32)
+    views, scalars = preprocess(raw, speeds)
+    rows = patches(torch.from_numpy(raw))
+    assert rows.shape == (3, 441, 256)
+    params = {name: p.detach().unsqueeze(0) for name, p in policy.named_parameters()}
+    with torch.no_grad():
+        expected = policy(views, scalars)
+        for head, (mu_ref, value_ref) in zip(HEADS, (expected[:2], expected[2:])):
+            module = getattr(policy, head)
+            pre1 = conv1(rows, module.conv1.weight, module.conv1.bias)
+            reference = module.conv1(views).permute(0, 2, 3, 1).reshape(3, 441, -1)
+            torch.testing.assert_close(pre1, reference, atol=1e-4, rtol=1e-4)
+            mu, value = head_after_conv1(pre1[None], torch.from_numpy(speeds)[None], params, head)
+            torch.testing.assert_close(mu[0], mu_ref, atol=1e-5, rtol=1e-4)
+            torch.testing.assert_close(value[0], value_ref, atol=1e-5, rtol=1e-4)
+
+
+@pytest.mark.parametrize("terminal, max_grad_norm", [(False, 1e9), (True, 1e9), (False, 0.5)])
+def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max_grad_norm):
+    """The update that reuses acting's first layer gives autograd's gradient on the whole segment,
+    clipping included, and moves the local weights by -lr times it."""
+    rng = np.random.default_rng(1)
+    torch.manual_seed(1)
+    policy = Policy()
+    config = DA3CConfig(update_interval=6, max_grad_norm=max_grad_norm, local_learning_rate=0.01)
+    n, sigma = 5, 0.4
+    params = {name: p.detach().clone() for name, p in policy.named_parameters()}
+    start = {name: p.clone() for name, p in params.items()}
+    learner = EpisodeLearner(
+        params=params, base_version=0, config=config, patches=torch.zeros(7, 441, 256),
+        pre1=torch.zeros(2, 7, 441, 16), scalars=np.zeros((7, 2), np.float32),
+        actions=np.zeros((6, 2), np.float32), rewards=np.zeros((6, 2), np.float32),
+        grad_sum={name: torch.zeros_like(p) for name, p in params.items()})
+    raw = rng.integers(0, 256, (n + 1, 16, 84, 84), dtype=np.uint8)
+    speeds = rng.uniform(0, 10, (n + 1, 2)).astype(np.float32)
+    actions = rng.normal(0, 0.5, (n, 2)).astype(np.float32)
+    rewards = rng.normal(0, 0.1, (n, 2)).astype(np.float32)
+    for t in range(n):
+        learner.observe(raw[t], speeds[t])
+        learner.first_layer(t)  # what acting does
+        learner.record(actions[t], *rewards[t])
+    learner.observe(raw[n], speeds[n])
+    learner.update(sigma, terminal=terminal)
+
+    leaves = {name: p.clone().requires_grad_(True) for name, p in start.items()}
+    views, scalars = preprocess(raw, speeds)
+    mu_acc, v_acc, mu_sa, v_sa = torch.func.functional_call(policy, leaves, (views, scalars))
+    boot = (0.0, 0.0) if terminal else (float(v_acc[n].detach()), float(v_sa[n].detach()))
+    a, r = torch.from_numpy(actions), torch.from_numpy(rewards)
+    acc = stream_loss(mu_acc[:n], v_acc[:n], a[:, 0], r[:, 0], boot[0], config.gamma, sigma)
+    sa = stream_loss(mu_sa[:n], v_sa[:n], a[:, 1], r[:, 1], boot[1], config.gamma, sigma)
+    (acc.policy + sa.policy + config.value_coef * (acc.value + sa.value)).backward()
+    torch.nn.utils.clip_grad_norm_(list(leaves.values()), max_grad_norm)
+    for name, leaf in leaves.items():
+        torch.testing.assert_close(learner.grad_sum[name], leaf.grad, atol=1e-5, rtol=1e-3)
+        torch.testing.assert_close(params[name], start[name] - 0.01 * leaf.grad, atol=1e-6, rtol=1e-4)
+    if max_grad_norm < 1:
+        total = math.sqrt(sum(float(g.square().sum()) for g in learner.grad_sum.values()))
+        assert total == pytest.approx(max_grad_norm, rel=1e-4)
+    # the last observation opens the next segment
+    assert learner.length == 0
+    torch.testing.assert_close(learner.patches[0], patches(torch.from_numpy(raw[n])))

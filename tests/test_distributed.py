@@ -217,3 +217,43 @@ def test_train_stops_cleanly_on_ctrl_c_and_leaves_a_checkpoint(tmp_path):
     assert process.returncode == 0, err
     assert "interrupted" in err
     assert list((run_dir / "checkpoints").glob("ckpt-*.pt"))
+
+
+def test_a_new_run_starts_from_given_weights_and_a_resumed_run_ignores_them(tmp_path):
+    """--init-from: a curriculum across scenarios (easy weights to start medium)."""
+    import numpy as np
+    import torch
+
+    from learner.core import LearnerCore
+
+    source = LearnerCore(seed=7)
+    source.apply({n: np.ones_like(w) for n, w in source.weights().items()}, 0, 10)
+    init = tmp_path / "init.pt"
+    torch.save(source.state_dict(), init)
+    config = LearnerServiceConfig(run_dir=tmp_path / "run", metrics_port=0, init_from=init,
+                                  transport=TransportConfig(listen=(f"tcp/127.0.0.1:{free_port()}",)))
+    logs: list[str] = []
+    service = LearnerService(config, log=logs.append)
+    assert service.core.version == 0  # a new run: its own version count
+    for name, weights in source.weights().items():
+        np.testing.assert_array_equal(service.core.weights()[name], weights)
+    assert any("starting from the weights in" in line for line in logs)
+    # a run directory with a checkpoint resumes from it, not from --init-from
+    resumed = LearnerCore(seed=3)
+    resumed.version = 42
+    (config.run_dir / "checkpoints").mkdir(parents=True)
+    torch.save(resumed.state_dict(), config.run_dir / "checkpoints" / "ckpt-000000042.pt")
+    service = LearnerService(config, log=logs.append)
+    assert service.core.version == 42
+    np.testing.assert_array_equal(service.core.weights()["acc.hidden.weight"], resumed.weights()["acc.hidden.weight"])
+
+
+def test_train_refuses_initial_weights_that_are_not_a_checkpoint(tmp_path):
+    bogus = tmp_path / "bogus.pt"
+    bogus.write_text("not a checkpoint")
+    result = subprocess.run([sys.executable, "-m", "crossway", "train", "--run-dir", str(tmp_path / "run"),
+                             "--init-from", str(bogus), "--metrics-port", "0"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode != 0
+    assert "bogus.pt is not a crossway checkpoint" in result.stderr
+    assert not (tmp_path / "run" / "checkpoints").exists()  # nothing started

@@ -54,7 +54,8 @@ def add_parser(subparsers) -> None:
             "Run one actor's loop without transport (simulator, every agent acting with its own "
             "local weights, local D-A3C updates every --update-interval steps) with every lane busy, "
             "and compare its agent-steps per second with the same network's bare forward+backward "
-            "rate on the same batch (one update segment). Pinned to one core, one torch thread."
+            "rate on the same batch (one update segment), timed as torch modules and in the matrix "
+            "form the actor uses; the faster of the two is the bar. Pinned to one core, one torch thread."
         ),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
@@ -164,6 +165,7 @@ def run_actor_bench(args) -> int:
 
     from algo.d_a3c import ActorCore, DA3CConfig
     from algo.policy import Policy, preprocess
+    from algo.stacked import HEADS, conv1, head_after_conv1, patches
     from learner.core import LearnerCore
     from simcore.simulator import SimConfig, Simulator
 
@@ -184,22 +186,49 @@ def run_actor_bench(args) -> int:
     elapsed = time.perf_counter() - started
     actor_rate = (core.agent_steps - steps_before) / elapsed
 
-    # the bare rate: forward and backward of the same network on one update segment
+    # the bare rate: forward and backward of the same network on one update segment, timed both
+    # as torch modules and in the matrix form the actor uses (algo.stacked); the faster is the bar
     policy = Policy()
     batch = args.update_interval + 1
-    views, scalars = preprocess(np.random.randint(0, 256, (batch, 16, 84, 84), dtype=np.uint8),
-                                np.full((batch, 2), 8.0, np.float32))
-    samples = 0
-    started = time.perf_counter()
-    while time.perf_counter() - started < min(args.seconds, 10.0):
+    raw = np.random.randint(0, 256, (batch, 16, 84, 84), dtype=np.uint8)
+    speeds = np.full((batch, 2), 8.0, np.float32)
+    views, scalars = preprocess(raw, speeds)
+
+    def modules_pass():
         policy.zero_grad()
         sum(out.sum() for out in policy(views, scalars)).backward()
-        samples += batch
-    bare_rate = samples / (time.perf_counter() - started)
+
+    rows = patches(torch.from_numpy(raw))
+    leaves = {name: p.detach().clone().requires_grad_(True) for name, p in policy.named_parameters()}
+    stacked = {name: leaf.unsqueeze(0) for name, leaf in leaves.items()}
+    speeds_t = torch.from_numpy(speeds)[None]
+
+    def matrix_pass():
+        total = 0.0
+        for head in HEADS:
+            pre1 = conv1(rows, leaves[f"{head}.conv1.weight"], leaves[f"{head}.conv1.bias"])
+            mu, value = head_after_conv1(pre1[None], speeds_t, stacked, head)
+            total = total + mu.sum() + value.sum()
+        for leaf in leaves.values():
+            leaf.grad = None
+        total.backward()
+
+    bare_rates = {}
+    for name, one_pass in (("modules", modules_pass), ("matrix", matrix_pass)):
+        one_pass()  # warm-up
+        samples = 0
+        started = time.perf_counter()
+        while time.perf_counter() - started < min(args.seconds, 10.0) / 2:
+            one_pass()
+            samples += batch
+        bare_rates[name] = samples / (time.perf_counter() - started)
+    bare_rate = max(bare_rates.values())
     report = {
         "bench": "actor", "scenario": sim.spec.name, "lanes": sim.num_slots,
         "agent_steps_per_s": round(actor_rate, 1),
         "bare_forward_backward_samples_per_s": round(bare_rate, 1),
+        "bare_modules_samples_per_s": round(bare_rates["modules"], 1),
+        "bare_matrix_samples_per_s": round(bare_rates["matrix"], 1),
         "ratio_to_bare": round(actor_rate / bare_rate, 3),
         "update_interval": args.update_interval, "batch": batch,
         "parameters": sum(p.numel() for p in policy.parameters()),

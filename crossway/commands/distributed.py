@@ -45,7 +45,13 @@ def _transport(args, listen: tuple[str, ...], connect: tuple[str, ...], mode: st
 def _add_learner_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--learning-rate", type=float, default=2.5e-4, help="Adam step size of the global network")
     parser.add_argument("--sigma-decay-steps", type=int, default=5_000_000,
-                        help="agent-steps over which the exploration sigma falls from 0.65 to 0.05")
+                        help="agent-steps over which the exploration sigma falls from --sigma-start to 0.05")
+    parser.add_argument("--sigma-start", type=float, default=0.65,
+                        help="exploration sigma at agent-step 0 (the paper: 0.65; lower to fine-tune a policy)")
+    parser.add_argument("--init-from", type=Path, default=None, metavar="CHECKPOINT",
+                        help="start a new run from these weights (a learner checkpoint or an exported policy, "
+                             "e.g. models/easy.pt, for a curriculum across scenarios); ignored when --run-dir "
+                             "already holds a checkpoint to resume from")
     parser.add_argument("--max-staleness", type=int, default=50,
                         help="refuse gradients computed on weights more than this many versions old")
     parser.add_argument("--checkpoint-interval", type=float, default=60.0, metavar="SECONDS",
@@ -130,13 +136,20 @@ def learner_config(args, listen: tuple[str, ...], connect: tuple[str, ...]):
 
     if args.learning_rate <= 0 or args.sigma_decay_steps < 0 or args.max_staleness < 0:
         raise ValueError("--learning-rate must be > 0, --sigma-decay-steps and --max-staleness >= 0")
+    if not 0.05 <= args.sigma_start <= 2.0:
+        raise ValueError(f"--sigma-start must be between 0.05 (the final sigma) and 2, got {args.sigma_start}")
+    if args.init_from is not None:
+        from algo.policy import load_policy
+
+        load_policy(args.init_from)  # fail here, before any process starts, with the file's problem
     if args.metrics_port < 0 or args.metrics_port > 65535:
         raise ValueError(f"--metrics-port must be 0-65535, got {args.metrics_port}")
     return LearnerServiceConfig(
         run_dir=args.run_dir, run_name=args.run_name, transport=_transport(args, listen, connect),
         metrics_port=args.metrics_port, checkpoint_interval_s=args.checkpoint_interval,
         learner=LearnerConfig(learning_rate=args.learning_rate, sigma_decay_agent_steps=args.sigma_decay_steps,
-                              max_staleness=args.max_staleness),
+                              sigma_start=args.sigma_start, max_staleness=args.max_staleness),
+        init_from=args.init_from,
     )
 
 
