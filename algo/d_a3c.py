@@ -19,7 +19,8 @@ import numpy as np
 import torch
 
 from algo.policy import ACTION_SCALE, Policy, PolicyConfig
-from algo.stacked import GRID, HEADS, PATCH_FEATURES, conv1, conv1_gradients, head_after_conv1, patches
+from algo.stacked import (GRID, HEADS, PATCH_FEATURES, after_conv1, conv1, conv1_gradients, first_layer_matrix,
+                          patches)
 from simcore.simulator import Simulator, StepResult
 
 LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
@@ -44,12 +45,12 @@ def n_step_returns(rewards: torch.Tensor, bootstrap: torch.Tensor | float, gamma
 
     ``rewards`` [T]; ``bootstrap`` V(s_T), 0 when the episode terminated.
     """
-    returns = torch.empty_like(rewards)
-    running = torch.as_tensor(bootstrap, dtype=rewards.dtype)
-    for t in range(rewards.shape[0] - 1, -1, -1):
-        running = rewards[t] + gamma * running
+    returns = [0.0] * rewards.shape[0]
+    running = float(bootstrap)
+    for t, reward in zip(range(rewards.shape[0] - 1, -1, -1), reversed(rewards.tolist())):
+        running = reward + gamma * running
         returns[t] = running
-    return returns
+    return torch.tensor(returns, dtype=rewards.dtype)
 
 
 def gaussian_log_prob(action: torch.Tensor, mu: torch.Tensor, sigma: float) -> torch.Tensor:
@@ -94,7 +95,7 @@ class EpisodeLearner:
     base_version: int
     config: DA3CConfig
     patches: torch.Tensor  # [update_interval + 1, 441, 256] float: segment observations
-    pre1: torch.Tensor  # [2, update_interval + 1, 441, C1] float: first layer's output per head
+    pre1: torch.Tensor  # [update_interval + 1, 441, 2 * C1] float: first layer's output, both heads
     scalars: np.ndarray  # [update_interval + 1, 2] float32: speed, target speed [m/s]
     actions: np.ndarray  # [update_interval, 2] float32, normalised units, unclipped samples
     rewards: np.ndarray  # [update_interval, 2] float32: R_acc, R_sa
@@ -102,6 +103,7 @@ class EpisodeLearner:
     grad_sum: dict[str, torch.Tensor] = field(default_factory=dict)
     losses: np.ndarray = field(default_factory=lambda: np.zeros(4))  # policy acc, policy sa, value acc, value sa
     updates: int = 0
+    _first_layer: tuple[torch.Tensor, torch.Tensor] | None = None  # from params; reset when they change
 
     def observe(self, views: np.ndarray, scalars: np.ndarray) -> None:
         """The observation the next action is taken from (uint8 views [16, 84, 84], speeds [2])."""
@@ -109,10 +111,14 @@ class EpisodeLearner:
         self.scalars[self.length] = scalars
 
     def first_layer(self, index: int) -> None:
-        """Run the first layer of both heads on observation ``index`` with the local weights."""
-        for h, head in enumerate(HEADS):
-            conv1(self.patches[index], self.params[f"{head}.conv1.weight"], self.params[f"{head}.conv1.bias"],
-                  out=self.pre1[h, index])
+        """Run both heads' first layer on observation ``index`` with the local weights."""
+        if self._first_layer is None:
+            self._first_layer = first_layer_matrix(self.params)
+        conv1(self.patches[index], *self._first_layer, out=self.pre1[index])
+
+    def reset_weights(self, params: dict[str, torch.Tensor]) -> None:
+        self.params = params
+        self._first_layer = None
 
     def record(self, action: np.ndarray, reward_acc: float, reward_sa: float) -> None:
         self.actions[self.length] = action
@@ -133,34 +139,30 @@ class EpisodeLearner:
             self.first_layer(n)  # V(s_n) bootstraps with the weights the segment was driven with
         leaves = {name: p.detach().requires_grad_(True) for name, p in self.params.items()
                   if ".conv1." not in name}
-        stacked = {name: leaf.unsqueeze(0) for name, leaf in leaves.items()}
-        scalars = torch.from_numpy(self.scalars[: n + 1]).unsqueeze(0)
-        pre1 = [self.pre1[h, : n + 1].detach().requires_grad_(True) for h in range(len(HEADS))]
-        (mu_acc, v_acc), (mu_sa, v_sa) = (
-            (out[0] for out in head_after_conv1(pre1[h].unsqueeze(0), scalars, stacked, head))
-            for h, head in enumerate(HEADS))
-        boot_acc = 0.0 if terminal else float(v_acc[n].detach())
-        boot_sa = 0.0 if terminal else float(v_sa[n].detach())
+        pre1 = self.pre1[: n + 1].detach().requires_grad_(True)
+        mu, values = after_conv1(pre1.unsqueeze(0), torch.from_numpy(self.scalars[: n + 1]).unsqueeze(0),
+                                 {name: leaf.unsqueeze(0) for name, leaf in leaves.items()})
+        mu, values = mu[0], values[0]  # [n + 1, 2]: acc, sa
+        boot = (0.0, 0.0) if terminal else values[n].tolist()
         actions = torch.from_numpy(self.actions[:n])
         rewards = torch.from_numpy(self.rewards[:n])
-        acc = stream_loss(mu_acc[:n], v_acc[:n], actions[:, 0], rewards[:, 0], boot_acc, cfg.gamma, sigma)
-        sa = stream_loss(mu_sa[:n], v_sa[:n], actions[:, 1], rewards[:, 1], boot_sa, cfg.gamma, sigma)
+        acc, sa = (stream_loss(mu[:n, h], values[:n, h], actions[:, h], rewards[:, h], boot[h], cfg.gamma, sigma)
+                   for h in range(2))
         loss = acc.policy + sa.policy + cfg.value_coef * (acc.value + sa.value)
         loss.backward()
         grads = {name: leaf.grad for name, leaf in leaves.items()}
-        for h, head in enumerate(HEADS):
-            weight, bias = conv1_gradients(self.patches[:n], pre1[h].grad[:n],
-                                           self.params[f"{head}.conv1.weight"].shape)
-            grads[f"{head}.conv1.weight"], grads[f"{head}.conv1.bias"] = weight, bias
+        grads.update(conv1_gradients(self.patches[:n], pre1.grad[:n], self.params["acc.conv1.weight"].shape))
+        names = list(grads)
+        grad_list = [grads[name] for name in names]
         with torch.no_grad():
-            # clip to max_grad_norm, as torch.nn.utils.clip_grad_norm_
-            total = torch.linalg.vector_norm(torch.stack([torch.linalg.vector_norm(g) for g in grads.values()]))
-            scale = min(1.0, cfg.max_grad_norm / (float(total) + 1e-6))
-            for name, grad in grads.items():
-                if scale < 1.0:
-                    grad.mul_(scale)
-                self.grad_sum[name].add_(grad)
-                self.params[name].add_(grad, alpha=-cfg.local_learning_rate)
+            # clip to max_grad_norm, as torch.nn.utils.clip_grad_norm_ (one fused call per step)
+            total = float(torch.linalg.vector_norm(torch.stack(torch._foreach_norm(grad_list))))
+            scale = cfg.max_grad_norm / (total + 1e-6)
+            if scale < 1.0:
+                torch._foreach_mul_(grad_list, scale)
+            torch._foreach_add_([self.grad_sum[name] for name in names], grad_list)
+            torch._foreach_add_([self.params[name] for name in names], grad_list, alpha=-cfg.local_learning_rate)
+        self._first_layer = None
         self.losses += [float(acc.policy.detach()), float(sa.policy.detach()),
                         float(acc.value.detach()), float(sa.value.detach())]
         self.updates += 1
@@ -231,14 +233,14 @@ class ActorCore:
                 params[name].copy_(p)
         if self._spare:
             learner = self._spare.pop()
-            learner.params = params
+            learner.reset_weights(params)
         else:
             n = self.config.update_interval
             conv1_channels = self.policy_config.conv1_channels
             learner = EpisodeLearner(
                 params=params, base_version=self.version, config=self.config,
                 patches=torch.zeros(n + 1, GRID * GRID, PATCH_FEATURES),
-                pre1=torch.zeros(len(HEADS), n + 1, GRID * GRID, conv1_channels),
+                pre1=torch.zeros(n + 1, GRID * GRID, len(HEADS) * conv1_channels),
                 scalars=np.zeros((n + 1, 2), np.float32),
                 actions=np.zeros((n, 2), np.float32), rewards=np.zeros((n, 2), np.float32),
             )
@@ -279,10 +281,9 @@ class ActorCore:
                 learners = [self._learners[slot] for slot in range(first, last)]
                 params = {name: weights[first:last] for name, weights in self.stacked.items()}
                 scalars = torch.from_numpy(np.stack([l.scalars[l.length] for l in learners]))[:, None]
-                for h, head in enumerate(HEADS):
-                    pre1 = torch.stack([l.pre1[h, l.length] for l in learners])[:, None]
-                    mu, _ = head_after_conv1(pre1, scalars, params, head)
-                    means[first:last, h] = mu[:, 0].numpy()
+                pre1 = torch.stack([l.pre1[l.length] for l in learners])[:, None]
+                mu, _ = after_conv1(pre1, scalars, params)
+                means[first:last] = mu[:, 0].numpy()
         return means
 
     def act(self) -> tuple[np.ndarray, np.ndarray]:

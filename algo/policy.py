@@ -10,8 +10,9 @@ Layer sizes (the paper gives none) are chosen for learning speed on a CPU: a 4x4
 convolution turns each 84x84 plane into 21x21 patches without overlap (a third of the cost of
 the Atari 8x8 stride-4 layer), a 3x3 stride-2 convolution gives 10x10x16, and one hidden layer
 of 128 units takes those features with the two scalars. Each sub-module has 212k parameters;
-one forward and backward pass costs about 0.7 ms per sample on one core (``crossway bench
-actor`` measures it).
+one forward and backward pass costs about 0.6-0.8 ms per sample on one core as torch modules
+(``crossway bench actor`` measures it). Actors run the same function in the matrix form of
+``algo.stacked``.
 """
 
 from __future__ import annotations

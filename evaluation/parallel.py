@@ -15,9 +15,13 @@ def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers:
     """``function(*job, progress)`` for every job in ``workers`` spawned processes.
 
     Each job puts the number of episodes it finished on ``progress``; this process prints
-    ``label: done/total episodes, elapsed, ETA`` at most twice a second on stderr. Results come
-    back in job order.
+    ``label: done/total episodes, elapsed, ETA`` on stderr: a bar redrawn at most twice a second
+    on a terminal, a line every 30 s (and at the end) into a log file. Results come back in job
+    order.
     """
+    interactive = sys.stderr.isatty()
+    interval = 0.5 if interactive else 30.0
+    prefix = "\r" if interactive else ""
     started = time.monotonic()
     context = multiprocessing.get_context("spawn")  # workers start clean (Zenoh, torch threads)
     with context.Manager() as manager:
@@ -31,13 +35,15 @@ def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers:
                 except queue.Empty:
                     continue
                 elapsed = time.monotonic() - started
-                if elapsed - shown < 0.5 and done < total:
+                if elapsed - shown < interval and done < total:
                     continue
                 shown = elapsed
                 filled = int(BAR_WIDTH * done / max(total, 1))
                 bar = "#" * filled + "-" * (BAR_WIDTH - filled)
-                print(f"\r{label} [{bar}] {done}/{total} episodes, {elapsed:5.0f} s, "
-                      f"ETA {elapsed / done * (total - done):5.0f} s", end="", file=sys.stderr, flush=True)
+                print(f"{prefix}{label} [{bar}] {done}/{total} episodes, {elapsed:5.0f} s, "
+                      f"ETA {elapsed / done * (total - done):5.0f} s", end="" if interactive else "\n",
+                      file=sys.stderr, flush=True)
             results = pending.get()
-    print(file=sys.stderr)
+    if interactive:
+        print(file=sys.stderr)
     return results

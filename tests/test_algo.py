@@ -8,7 +8,7 @@ import torch
 
 from algo.d_a3c import ActorCore, DA3CConfig, EpisodeLearner, gaussian_log_prob, n_step_returns, stream_loss
 from algo.policy import Policy, preprocess, sigma_at
-from algo.stacked import HEADS, conv1, head_after_conv1, patches
+from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
 from learner.core import LearnerConfig, LearnerCore, StaleGradient
 from simcore.simulator import SimConfig, Simulator
 
@@ -148,24 +148,29 @@ def test_agents_hold_their_own_weights_and_batched_acting_matches_one_by_one():
 
 
 def test_matrix_form_of_the_network_matches_the_modules():
+    """Patches, the first layer as one product for both heads, and the rest for stacked weight
+    sets give Policy's outputs."""
     torch.manual_seed(0)
-    policy = Policy()
-    raw = np.random.default_rng(0).integers(0, 256, (3, 16, 84, 84), dtype=np.uint8)
-    speeds = np.array([[1.0, 8.0], [5.0, 8.0], [9.5, 10.0]], np.float32)
-    views, scalars = preprocess(raw, speeds)
+    policies = [Policy(), Policy()]
+    raw = np.random.default_rng(0).integers(0, 256, (2, 3, 16, 84, 84), dtype=np.uint8)
+    speeds = np.random.default_rng(1).uniform(0, 10, (2, 3, 2)).astype(np.float32)
     rows = patches(torch.from_numpy(raw))
-    assert rows.shape == (3, 441, 256)
-    params = {name: p.detach().unsqueeze(0) for name, p in policy.named_parameters()}
+    assert rows.shape == (2, 3, 441, 256)
+    # patch k of the grid holds the 4x4 window at (4 * (k // 21), 4 * (k % 21)) of every plane
+    np.testing.assert_array_equal(rows[1, 2, 21 * 5 + 7].numpy().reshape(16, 4, 4), raw[1, 2, :, 20:24, 28:32])
+    stacked = {name: torch.stack([dict(p.named_parameters())[name].detach() for p in policies])
+               for name, _ in policies[0].named_parameters()}
     with torch.no_grad():
-        expected = policy(views, scalars)
-        for head, (mu_ref, value_ref) in zip(HEADS, (expected[:2], expected[2:])):
-            module = getattr(policy, head)
-            pre1 = conv1(rows, module.conv1.weight, module.conv1.bias)
-            reference = module.conv1(views).permute(0, 2, 3, 1).reshape(3, 441, -1)
-            torch.testing.assert_close(pre1, reference, atol=1e-4, rtol=1e-4)
-            mu, value = head_after_conv1(pre1[None], torch.from_numpy(speeds)[None], params, head)
-            torch.testing.assert_close(mu[0], mu_ref, atol=1e-5, rtol=1e-4)
-            torch.testing.assert_close(value[0], value_ref, atol=1e-5, rtol=1e-4)
+        pre1 = torch.stack([conv1(rows[b], *first_layer_matrix({n: w[b] for n, w in stacked.items()}))
+                            for b in range(2)])
+        mu, values = after_conv1(pre1, torch.from_numpy(speeds), stacked)
+        for b, policy in enumerate(policies):
+            views, scalars = preprocess(raw[b], speeds[b])
+            mu_acc, v_acc, mu_sa, v_sa = policy(views, scalars)
+            reference = policy.acc.conv1(views).permute(0, 2, 3, 1).reshape(3, 441, -1)
+            torch.testing.assert_close(pre1[b, :, :, :16], reference, atol=1e-4, rtol=1e-4)
+            torch.testing.assert_close(mu[b], torch.stack([mu_acc, mu_sa], 1), atol=1e-5, rtol=1e-4)
+            torch.testing.assert_close(values[b], torch.stack([v_acc, v_sa], 1), atol=1e-5, rtol=1e-4)
 
 
 @pytest.mark.parametrize("terminal, max_grad_norm", [(False, 1e9), (True, 1e9), (False, 0.5)])
@@ -181,7 +186,7 @@ def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max
     start = {name: p.clone() for name, p in params.items()}
     learner = EpisodeLearner(
         params=params, base_version=0, config=config, patches=torch.zeros(7, 441, 256),
-        pre1=torch.zeros(2, 7, 441, 16), scalars=np.zeros((7, 2), np.float32),
+        pre1=torch.zeros(7, 441, 32), scalars=np.zeros((7, 2), np.float32),
         actions=np.zeros((6, 2), np.float32), rewards=np.zeros((6, 2), np.float32),
         grad_sum={name: torch.zeros_like(p) for name, p in params.items()})
     raw = rng.integers(0, 256, (n + 1, 16, 84, 84), dtype=np.uint8)

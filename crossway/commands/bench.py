@@ -165,7 +165,7 @@ def run_actor_bench(args) -> int:
 
     from algo.d_a3c import ActorCore, DA3CConfig
     from algo.policy import Policy, preprocess
-    from algo.stacked import HEADS, conv1, head_after_conv1, patches
+    from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
     from learner.core import LearnerCore
     from simcore.simulator import SimConfig, Simulator
 
@@ -179,12 +179,26 @@ def run_actor_bench(args) -> int:
     core.reset()
     for _ in range(3 * args.update_interval):  # warm-up: every agent has updated once
         core.step()
+    # time the simulator's share apart: the rest is acting, updating and bookkeeping
+    simulator_step = sim.step
+    simulator_seconds = 0.0
+
+    def timed_step(actions):
+        nonlocal simulator_seconds
+        t0 = time.perf_counter()
+        result = simulator_step(actions)
+        simulator_seconds += time.perf_counter() - t0
+        return result
+
+    sim.step = timed_step
     steps_before = core.agent_steps
     started = time.perf_counter()
     while time.perf_counter() - started < args.seconds:
         core.step()
     elapsed = time.perf_counter() - started
-    actor_rate = (core.agent_steps - steps_before) / elapsed
+    actor_steps = core.agent_steps - steps_before
+    actor_rate = actor_steps / elapsed
+    learning_rate = actor_steps / (elapsed - simulator_seconds)  # agent-steps per second outside the simulator
 
     # the bare rate: forward and backward of the same network on one update segment, timed both
     # as torch modules and in the matrix form the actor uses (algo.stacked); the faster is the bar
@@ -204,14 +218,11 @@ def run_actor_bench(args) -> int:
     speeds_t = torch.from_numpy(speeds)[None]
 
     def matrix_pass():
-        total = 0.0
-        for head in HEADS:
-            pre1 = conv1(rows, leaves[f"{head}.conv1.weight"], leaves[f"{head}.conv1.bias"])
-            mu, value = head_after_conv1(pre1[None], speeds_t, stacked, head)
-            total = total + mu.sum() + value.sum()
+        pre1 = conv1(rows, *first_layer_matrix(leaves))
+        mu, value = after_conv1(pre1[None], speeds_t, stacked)
         for leaf in leaves.values():
             leaf.grad = None
-        total.backward()
+        (mu.sum() + value.sum()).backward()
 
     bare_rates = {}
     for name, one_pass in (("modules", modules_pass), ("matrix", matrix_pass)):
@@ -230,6 +241,9 @@ def run_actor_bench(args) -> int:
         "bare_modules_samples_per_s": round(bare_rates["modules"], 1),
         "bare_matrix_samples_per_s": round(bare_rates["matrix"], 1),
         "ratio_to_bare": round(actor_rate / bare_rate, 3),
+        "simulator_share": round(simulator_seconds / elapsed, 3),
+        "agent_steps_per_s_outside_simulator": round(learning_rate, 1),
+        "ratio_to_bare_outside_simulator": round(learning_rate / bare_rate, 3),
         "update_interval": args.update_interval, "batch": batch,
         "parameters": sum(p.numel() for p in policy.parameters()),
         "cpu_pinned": cpu, "torch_threads": torch.get_num_threads(),
