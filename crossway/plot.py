@@ -57,7 +57,8 @@ def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, t
     ctx = cairo.Context(surface)
     ctx.set_source_rgb(1, 1, 1)
     ctx.paint()
-    left, right, top, bottom = 80, 20, 50, 60
+    legend_rows = len(series)
+    left, right, top, bottom = 80, 20, 50, 60 + 18 * legend_rows  # the legend sits under the axis label
     all_x = [v for _, xs, _ in series for v in xs]
     all_y = [v for _, _, ys in series for v in ys]
     x0, x1 = min(all_x), max(all_x)
@@ -99,7 +100,7 @@ def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, t
     ctx.move_to(left, 30)
     ctx.show_text(title)
     ctx.set_font_size(13)
-    ctx.move_to(left + (width - left - right) / 2 - ctx.text_extents(x_label).width / 2, height - 18)
+    ctx.move_to(left + (width - left - right) / 2 - ctx.text_extents(x_label).width / 2, height - bottom + 42)
     ctx.show_text(x_label)
     ctx.save()
     ctx.move_to(22, top + (height - top - bottom) / 2 + ctx.text_extents(y_label).width / 2)
@@ -118,13 +119,13 @@ def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, t
         ctx.stroke()
     ctx.restore()
     ctx.set_font_size(12)
-    for i, (name, _, _) in enumerate(series):
-        y = top + 18 + 18 * i
+    for i, (name, _, _) in enumerate(series):  # one row per series, below the plot: never over a curve
+        y = height - 18 * (legend_rows - i) + 2
         ctx.set_source_rgb(*COLOURS[i % len(COLOURS)])
-        ctx.rectangle(width - right - 230, y - 9, 14, 4)
+        ctx.rectangle(left, y - 6, 18, 4)
         ctx.fill()
         ctx.set_source_rgb(0.1, 0.1, 0.1)
-        ctx.move_to(width - right - 210, y - 3)
+        ctx.move_to(left + 26, y)
         ctx.show_text(name)
     surface.write_to_png(str(out))
     return out
