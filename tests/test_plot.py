@@ -1,0 +1,52 @@
+"""Learning-curve pictures: real PNG files read back and checked pixel by pixel."""
+
+import subprocess
+import sys
+
+import cairo
+import numpy as np
+import pytest
+
+from crossway.plot import COLOURS, plot_curves, read_progress
+
+
+def pixels(path) -> np.ndarray:
+    surface = cairo.ImageSurface.create_from_png(str(path))
+    data = np.frombuffer(surface.get_data(), np.uint8).reshape(surface.get_height(), surface.get_stride() // 4, 4)
+    return data[:, : surface.get_width(), 2::-1]  # BGRx in memory -> RGB
+
+
+def colour_rows(image: np.ndarray, colour) -> np.ndarray:
+    target = np.round(np.array(colour) * 255).astype(int)
+    hits = np.all(np.abs(image.astype(int) - target) <= 2, axis=2)
+    return np.flatnonzero(hits.any(axis=1))
+
+
+def test_curves_are_drawn_and_the_legend_stays_out_of_the_plot(tmp_path):
+    xs = list(np.linspace(0, 1e6, 200))
+    out = plot_curves([("first", xs, [min(1.0, x / 5e5) for x in xs]), ("second", xs, [0.5] * 200)],
+                      tmp_path / "c.png", "title", "agent steps", "reach rate", y_range=(0, 1))
+    image = pixels(out)
+    assert image.shape == (480, 800, 3)
+    height, bottom = 480, 60 + 18 * 2  # the plot frame ends at height - bottom
+    first, second = colour_rows(image, COLOURS[0]), colour_rows(image, COLOURS[1])
+    # each curve inside the frame, each legend swatch below it, in its own row
+    assert first.min() < height - bottom and second.min() < height - bottom
+    legend_first, legend_second = first[first > height - bottom], second[second > height - bottom]
+    assert len(legend_first) and len(legend_second)
+    assert legend_first.max() < legend_second.min()
+    # the flat second curve at y = 0.5 is one horizontal band in the middle of the frame
+    inside = second[second < height - bottom]
+    assert inside.max() - inside.min() <= 3
+
+
+def test_progress_columns_are_checked(tmp_path):
+    path = tmp_path / "progress.csv"
+    path.write_text("wall_s,agent_steps,reach_rate\n1,10,0.5\n2,20,0.75\n")
+    assert read_progress(path, "agent_steps", "reach_rate") == ([10.0, 20.0], [0.5, 0.75])
+    with pytest.raises(ValueError, match="no column 'speed'"):
+        read_progress(path, "agent_steps", "speed")
+    result = subprocess.run([sys.executable, "-m", "crossway", "plot", f"run={path}", "--out", str(tmp_path / "p.png")],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert pixels(tmp_path / "p.png").shape == (480, 800, 3)
