@@ -76,6 +76,9 @@ class SimConfig:
     equal_speeds: bool = False
 
 
+TRAFFIC_SIDE_MARGIN_M = 0.5  # lateral margin of an IDM car's corridor beyond one car width [m]
+
+
 @dataclass(frozen=True)
 class TrafficConfig:
     """Scripted traffic cars (paper, "Comparison with TTC method"): they follow the centre of their
@@ -361,7 +364,9 @@ class Simulator:
                     continue
                 s_u, r_u = path.local_coordinates((self.x[u], self.y[u]))
                 ahead = s_u - self.s[v]
-                if 0.0 < ahead < gap + VEHICLE_LENGTH and abs(r_u) < self.spec.lane_width_m:
+                # corridor: the two bodies would overlap side by side (centres closer than one car
+                # width plus a margin); a car on the next lane, a lane width away, is not in it
+                if 0.0 < ahead < gap + VEHICLE_LENGTH and abs(r_u) < VEHICLE_WIDTH + TRAFFIC_SIDE_MARGIN_M:
                     gap = ahead - VEHICLE_LENGTH
                     heading_gap = self.heading[u] - self.heading[v]
                     closing = self.speed[v] - self.speed[u] * math.cos(heading_gap)

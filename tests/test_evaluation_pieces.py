@@ -176,3 +176,22 @@ def test_ttc_driver_waits_for_a_gap_in_traffic():
         result = sim.step(patient.act())
         assert not result.terminated[0] or result.episodes[0].end_reason == "time_over"
     assert not patient.going[0] or not sim.present[0]
+
+
+def test_ttc_with_bodies_by_hand():
+    """With sizes, the ego's strip (half width 1 m) and the car's body (4 m x 2 m) count."""
+    ego = (0.0, 0.0, math.pi / 2)  # heading north: the strip is -1 < x < 1
+    sizes = dict(ego_half_width_m=1.0, car_half_length_m=2.0, car_half_width_m=1.0)
+    # a car 20 m east heading west at 5 m/s: its nose (x = 18) reaches the strip edge (x = 1) in 17 / 5 s
+    assert float(time_to_axis(*ego, 20.0, 30.0, math.pi, 5.0, **sizes)) == pytest.approx(17.0 / 5.0)
+    # a car heading north beside the strip (gap 3 - 1 - 1 = 1 m) drives parallel: it never reaches it
+    assert math.isinf(float(time_to_axis(*ego, 3.0, 30.0, math.pi / 2, 5.0, **sizes)))
+    # a car standing across the path 10 m ahead, its centre 2.5 m east: body reaches x = 0.5, on the strip
+    assert float(time_to_axis(*ego, 2.5, 10.0, math.pi, 0.0, **sizes)) == 0.0
+    # ... whose centre just passed the line (moving away) but whose tail is still on the strip
+    assert float(time_to_axis(*ego, -2.0, 10.0, math.pi, 8.0, **sizes)) == 0.0
+    # the centre-only definition (no sizes) calls both of those "never"
+    assert math.isinf(float(time_to_axis(*ego, 2.5, 10.0, math.pi, 0.0)))
+    assert math.isinf(float(time_to_axis(*ego, -2.0, 10.0, math.pi, 8.0)))
+    # ahead_only: the same standing car behind the ego does not count
+    assert math.isinf(float(time_to_axis(*ego, 2.5, -10.0, math.pi, 0.0, ahead_only=True, **sizes)))

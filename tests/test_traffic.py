@@ -114,3 +114,21 @@ def test_equal_speeds_give_every_learner_the_same_start():
     first = (sim.speed[0], sim.target_speed[0])
     sim.reset()
     assert (sim.speed[0], sim.target_speed[0]) != first  # drawn again at every reset
+
+
+def test_traffic_on_neighbouring_and_opposite_lanes_does_not_block():
+    """Only a car in the traffic car's own corridor leads it: cars one lane width to the side, on
+    the next lane or driving the other way, never stop it (they once gridlocked the junction)."""
+    sim = ttc_like(max_cars=12, traffic_delay_s=0.0, start_all_at_reset=False, delay_min_s=1e6, delay_max_s=1e6)
+    sim.reset()
+    stopped_longest = np.zeros(sim.num_vehicles)
+    stopped = np.zeros(sim.num_vehicles)
+    for _ in range(1500):  # 150 s of busy main road, no learner on the road
+        result = sim.step(np.zeros((sim.num_slots, 2)))
+        traffic = sim.num_slots + np.flatnonzero(sim.present[sim.num_slots:])
+        standing = np.zeros(sim.num_vehicles, dtype=bool)
+        standing[traffic] = sim.speed[traffic] < 0.1
+        stopped = np.where(standing, stopped + 1, 0)
+        stopped_longest = np.maximum(stopped_longest, stopped)
+    assert stopped_longest.max() < 30  # no traffic car stood still for 3 s
+    assert not sim.present[: sim.num_slots].any()
