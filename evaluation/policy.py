@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from algo.policy import ACTION_SCALE, Policy, load_policy, preprocess
+from algo.policy import ACTION_SCALE, Policy, load_policy
+from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
 
 
 def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Path:
@@ -26,23 +27,31 @@ def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Pa
 
 
 class PolicyDriver:
-    """Acts for every learner slot of a ``Simulator`` from the newest ``StepResult``."""
+    """Acts for every learner slot of a ``Simulator`` from the newest ``StepResult``.
+
+    The network runs in the matrix form of ``algo.stacked`` (the same function as ``Policy``,
+    about twice as fast on a CPU as its convolution modules for these layer shapes).
+    """
 
     def __init__(self, sim, policy: Policy, sigma: float = 0.0, seed: int | None = None):
         self.sim = sim
         self.policy = policy
         self.sigma = sigma
         self._rng = np.random.default_rng(seed)
+        weights = {name: p.detach() for name, p in policy.named_parameters()}
+        self._first_layer = first_layer_matrix(weights)
+        self._params = {name: w.unsqueeze(0) for name, w in weights.items()}  # one weight set
 
     def act(self, result) -> np.ndarray:
         actions = np.zeros((self.sim.num_slots, 2))
         active = np.flatnonzero(self.sim.learners_present)
         if len(active) == 0:
             return actions
-        views, scalars = preprocess(result.views[active], result.scalars[active])
         with torch.no_grad():
-            mu_acc, _, mu_sa, _ = self.policy(views, scalars)
-        means = np.stack([mu_acc.numpy(), mu_sa.numpy()], axis=1)
+            pre1 = conv1(patches(torch.from_numpy(result.views[active])), *self._first_layer)
+            scalars = torch.from_numpy(np.ascontiguousarray(result.scalars[active], dtype=np.float32))
+            mu, _ = after_conv1(pre1[None], scalars[None], self._params)
+        means = mu[0].numpy().astype(np.float64)
         if self.sigma > 0:
             means = means + self.sigma * self._rng.standard_normal(means.shape)
         actions[active] = np.clip(means, -1.0, 1.0) * ACTION_SCALE

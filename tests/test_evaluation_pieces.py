@@ -195,3 +195,30 @@ def test_ttc_with_bodies_by_hand():
     assert math.isinf(float(time_to_axis(*ego, -2.0, 10.0, math.pi, 8.0)))
     # ahead_only: the same standing car behind the ego does not count
     assert math.isinf(float(time_to_axis(*ego, 2.5, -10.0, math.pi, 0.0, ahead_only=True, **sizes)))
+
+
+def test_policy_driver_acts_as_the_policy_modules():
+    """The driver's matrix form gives Policy's means, clipped and scaled to m/s^2 and rad."""
+    import torch
+
+    from algo.policy import ACTION_SCALE, Policy, preprocess
+    from evaluation.policy import PolicyDriver
+    from simcore.simulator import SimConfig, Simulator
+
+    torch.manual_seed(4)
+    policy = Policy()
+    with torch.no_grad():
+        policy.acc.mu.weight.mul_(300.0)  # means away from 0, some beyond the clip
+    sim = Simulator("medium", SimConfig(delay_max_s=0.0), seed=2)
+    result = sim.reset()
+    driver = PolicyDriver(sim, policy)
+    for _ in range(5):
+        result = sim.step(driver.act(result))
+    active = np.flatnonzero(sim.learners_present)
+    assert len(active) >= 2
+    actions = driver.act(result)
+    with torch.no_grad():
+        mu_acc, _, mu_sa, _ = policy(*preprocess(result.views[active], result.scalars[active]))
+    expected = np.clip(np.stack([mu_acc.numpy(), mu_sa.numpy()], 1), -1, 1) * ACTION_SCALE
+    np.testing.assert_allclose(actions[active], expected, atol=1e-5)
+    assert not actions[np.setdiff1d(np.arange(sim.num_slots), active)].any()
