@@ -54,6 +54,7 @@ YIELD_SEGMENTS = 3  # a yield line is drawn as this many segments across its lan
 YIELD_FILL = 0.7  # fraction of each segment's share of the lane that is painted
 MARGIN_PX = 14  # space around the panel's blocks [px]
 LINE_PX = 18  # height of one text line [px]
+PANEL_TEXT_LINES = 6  # text rows reserved above the views (longer text is cut)
 FONT = "DejaVu Sans"
 
 
@@ -254,7 +255,7 @@ def _legend(sim, traffic) -> list[tuple[str, tuple[float, float, float]]]:
 
 def _panel_scale(world_px: int) -> int:
     """View pixels are drawn as scale x scale blocks: as large as fits the global view's height."""
-    fixed = 5 * LINE_PX + 2 * LINE_PX + LINE_PX + 4 * MARGIN_PX  # text, view labels, legend, gaps
+    fixed = (PANEL_TEXT_LINES + 1) * LINE_PX + 2 * LINE_PX + LINE_PX + 4 * MARGIN_PX  # text, view labels, legend, gaps
     return int(min(4, max(2, (world_px - fixed) // (2 * VIEW_SIZE_PX))))
 
 
@@ -311,7 +312,9 @@ def render_frame(sim, result=None, focus_slot: int | None = None, pixels_per_m: 
     for line, heading in _status_lines(sim, result, focus_slot, focus_ok, episodes, caption):
         _font(measure, 15.0 if heading else 12.0, heading)
         text_lines += [(part, heading) for part in _wrap(measure, line, panel_w - 2 * MARGIN_PX)]
-    views_top = MARGIN_PX + len(text_lines) * LINE_PX + LINE_PX
+    # a fixed number of text rows, so that every frame of an animation has the same size
+    text_lines = text_lines[:PANEL_TEXT_LINES]
+    views_top = MARGIN_PX + PANEL_TEXT_LINES * LINE_PX + LINE_PX
     legend_top = views_top + 2 * (view_px + LINE_PX + MARGIN_PX)
     height = max(world_px, legend_top + LINE_PX + MARGIN_PX)
     legend_top = height - LINE_PX - MARGIN_PX  # the legend sits at the bottom

@@ -72,6 +72,11 @@ def test_frame_shape_and_layout(running):
     assert frame.shape[0] >= world_px
     assert frame.shape[1] > world_px + 2 * 2 * VIEW_SIZE_PX  # the panel holds two views a row, >= 2x
     assert render_frame(sim, result, 0, pixels_per_m=PPM).shape == frame.shape  # stable size
+    # and stable whatever the panel's text: an animation's frames must all have one size
+    wordy = render_frame(sim, result, 0, pixels_per_m=PPM, caption="a long caption " * 12,
+                         episodes={"goal": 12345, "crash": 678, "off_path": 9, "time_over": 10, "horizon": 11})
+    assert wordy.shape == frame.shape
+    assert render_frame(sim, result, None, pixels_per_m=PPM).shape == frame.shape
 
 
 def test_cars_are_green_at_their_centres(running):
