@@ -52,7 +52,13 @@ def _label(value: float) -> str:
 
 def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, title: str, x_label: str,
                 y_label: str, y_range: tuple[float, float] | None = None, width: int = 800,
-                height: int = 480) -> Path:
+                height: int = 480, styles: list[tuple[int, bool]] | None = None) -> Path:
+    """Curves of (name, xs, ys) on shared axes, written as a PNG; ``styles`` gives each series a
+    (colour index, dashed) pair (default: colours in order, solid lines)."""
+    if styles is None:
+        styles = [(i, False) for i in range(len(series))]
+    if len(styles) != len(series):
+        raise ValueError(f"{len(styles)} styles for {len(series)} series")
     surface = cairo.ImageSurface(cairo.FORMAT_RGB24, width, height)
     ctx = cairo.Context(surface)
     ctx.set_source_rgb(1, 1, 1)
@@ -111,18 +117,21 @@ def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, t
     ctx.rectangle(left, top, width - left - right, height - top - bottom)
     ctx.clip()
     ctx.set_line_width(2)
-    for i, (_, xs, ys) in enumerate(series):
-        ctx.set_source_rgb(*COLOURS[i % len(COLOURS)])
+    for (_, xs, ys), (colour, dashed) in zip(series, styles):
+        ctx.set_source_rgb(*COLOURS[colour % len(COLOURS)])
+        ctx.set_dash([8.0, 5.0] if dashed else [])
         ctx.move_to(px(xs[0]), py(ys[0]))
         for x, y in zip(xs[1:], ys[1:]):
             ctx.line_to(px(x), py(y))
         ctx.stroke()
+    ctx.set_dash([])
     ctx.restore()
     ctx.set_font_size(12)
-    for i, (name, _, _) in enumerate(series):  # one row per series, below the plot: never over a curve
+    for i, ((name, _, _), (colour, dashed)) in enumerate(zip(series, styles)):  # one row each, below the plot
         y = height - 18 * (legend_rows - i) + 2
-        ctx.set_source_rgb(*COLOURS[i % len(COLOURS)])
-        ctx.rectangle(left, y - 6, 18, 4)
+        ctx.set_source_rgb(*COLOURS[colour % len(COLOURS)])
+        for start in ((0, 12) if dashed else (0,)):  # a dashed swatch is two short bars
+            ctx.rectangle(left + start, y - 6, 8 if dashed else 18, 4)
         ctx.fill()
         ctx.set_source_rgb(0.1, 0.1, 0.1)
         ctx.move_to(left + 26, y)

@@ -100,8 +100,6 @@ def sweep_thresholds(thresholds: list[float], episodes: int, delays: list[float]
 
 def run_comparison(checkpoint: str | None, threshold_s: float, episodes: int, delays: list[float],
                    workers: int, seed: int, out_dir: Path, command: str) -> dict:
-    from crossway.plot import plot_curves
-
     drivers = ["ttc"] + (["policy"] if checkpoint is not None else [])
     if checkpoint is not None:
         from evaluation.policy import load_policy
@@ -118,21 +116,32 @@ def run_comparison(checkpoint: str | None, threshold_s: float, episodes: int, de
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    pictures = []
-    for metric, title in (("goal_rate", "Reaches"), ("time_over_rate", "Time-overs")):
-        series = []
-        for driver in drivers:
-            for level in TRAFFIC_LEVELS:
-                mine = sorted((r for r in rows if r["driver"] == driver and r["level"] == level),
-                              key=lambda r: r["delay_max_s"])
-                name = f"{'TTC' if driver == 'ttc' else 'learned'} ({level})"
-                series.append((name, [r["delay_max_s"] for r in mine], [r[metric] for r in mine]))
-        path = out_dir / f"ttc-{metric.replace('_rate', '')}.png"
-        plot_curves(series, path, f"{title} against traffic delay_max (TTC threshold {threshold_s:g} s)",
-                    "traffic delay_max [s]", f"{title.lower()} (fraction)", (0.0, 1.0))
-        pictures.append(path)
+    pictures = draw_figures(rows, threshold_s, out_dir)
     meta = {"checkpoint": checkpoint, "threshold_s": threshold_s, "episodes_per_cell": episodes, "delays_max_s": delays,
             "levels": TRAFFIC_LEVELS, "seed": seed, "wall_s": round(time.monotonic() - started, 1), "command": command}
     json_path = out_dir / "ttc-comparison.json"
     json_path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
     return {"rows": rows, "paths": [json_path, csv_path, *pictures], "meta": meta}
+
+
+def draw_figures(rows: list[dict], threshold_s: float, out_dir: Path) -> list[Path]:
+    """The paper's two figures from comparison rows: reaches and time-overs against the traffic's
+    delay_max, one colour per traffic level, the TTC agent dashed and the learned policy solid."""
+    from crossway.plot import plot_curves
+
+    drivers = [d for d in ("ttc", "policy") if any(r["driver"] == d for r in rows)]
+    pictures = []
+    for metric, title in (("goal_rate", "Reaches"), ("time_over_rate", "Time-overs")):
+        series, styles = [], []
+        for driver in drivers:
+            for colour, level in enumerate(TRAFFIC_LEVELS):  # one colour per level; TTC dashed
+                mine = sorted((r for r in rows if r["driver"] == driver and r["level"] == level),
+                              key=lambda r: r["delay_max_s"])
+                name = f"{'TTC' if driver == 'ttc' else 'learned'} ({level})"
+                series.append((name, [r["delay_max_s"] for r in mine], [r[metric] for r in mine]))
+                styles.append((colour, driver == "ttc"))
+        path = out_dir / f"ttc-{metric.replace('_rate', '')}.png"
+        plot_curves(series, path, f"{title} against traffic delay_max (TTC threshold {threshold_s:g} s)",
+                    "traffic delay_max [s]", f"{title.lower()} (fraction)", (0.0, 1.0), styles=styles)
+        pictures.append(path)
+    return pictures

@@ -50,3 +50,17 @@ def test_progress_columns_are_checked(tmp_path):
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert pixels(tmp_path / "p.png").shape == (480, 800, 3)
+
+
+def test_styles_share_a_colour_and_dash_a_series(tmp_path):
+    xs = [0.0, 1.0]
+    series = [("solid", xs, [0.25, 0.25]), ("dashed", xs, [0.75, 0.75])]
+    out = plot_curves(series, tmp_path / "s.png", "t", "x", "y", y_range=(0, 1), styles=[(0, False), (0, True)])
+    image = pixels(out)
+    target = np.round(np.array(COLOURS[0]) * 255).astype(int)
+    hits = np.all(np.abs(image.astype(int) - target) <= 2, axis=2)
+    rows = np.flatnonzero(hits.sum(axis=1) > 200)  # long runs of the colour: the two curves
+    solid_row, dashed_row = rows.max(), rows.min()  # y = 0.25 is lower in the picture
+    assert hits[solid_row].sum() > 1.4 * hits[dashed_row].sum()  # the dashed line has gaps
+    with pytest.raises(ValueError, match="2 styles for 1 series"):
+        plot_curves(series[:1], tmp_path / "bad.png", "t", "x", "y", styles=[(0, False), (1, True)])
