@@ -22,6 +22,8 @@ OUTCOMES = ("goal", "crash", "off_path", "time_over")
 COLUMN_NAMES = {"goal": "Reaches", "crash": "Crashes", "off_path": "Off-roads", "time_over": "Time-overs"}
 
 # Table I of the paper: per scenario and sign, (reaches, crashes, off-roads, time-overs, speed m/s)
+CHUNK_EPISODES = 500  # a test's episodes per worker job
+
 PAPER_TABLE1 = {
     "easy": {"none": (0.998, 0.002, 0.0, 0.0, 8.533), "yield": (0.995, 0.005, 0.0, 0.0, 8.280),
              "stop": (0.992, 0.008, 0.0, 0.0, 8.105)},
@@ -81,6 +83,21 @@ def run_test(spec: TestSpec, progress=None) -> dict:
         progress.put(done % 25)
     return {"delay_max_s": spec.delay_max_s, "counts": {s: dict(c) for s, c in counts.items()},
             "speed_sum": dict(speed_sum)}
+
+
+def merge_chunks(parts: list[dict]) -> list[dict]:
+    """Chunks of the same test (same delay_max) summed into one result per test, in order."""
+    merged: dict[float, dict] = {}
+    for part in parts:
+        test = merged.setdefault(part["delay_max_s"], {"delay_max_s": part["delay_max_s"], "counts": {},
+                                                       "speed_sum": {}})
+        for sign, counts in part["counts"].items():
+            total = test["counts"].setdefault(sign, {})
+            for reason, count in counts.items():
+                total[reason] = total.get(reason, 0) + count
+        for sign, speed in part["speed_sum"].items():
+            test["speed_sum"][sign] = test["speed_sum"].get(sign, 0.0) + speed
+    return list(merged.values())
 
 
 def summarise(tests: list[dict]) -> dict:
@@ -151,8 +168,14 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
         load_policy(checkpoint)  # refuse a bad checkpoint before starting workers
     tests = [TestSpec(spec.name, d, episodes, seed + i, checkpoint)
              for i, d in enumerate(delay_schedule(spec.episodes.delay_max_s))]
+    # each test runs as chunks of at most CHUNK_EPISODES episodes (own simulator, own seed), so
+    # every worker stays busy to the end; the chunks do not depend on --workers
+    chunks = [TestSpec(t.scenario, t.delay_max_s, min(CHUNK_EPISODES, t.episodes - start),
+                       t.seed + 1000 * (start // CHUNK_EPISODES), t.checkpoint)
+              for t in tests for start in range(0, t.episodes, CHUNK_EPISODES)]
     started = time.monotonic()
-    results = run_parallel(run_test, [(t,) for t in tests], episodes * len(tests), workers, f"table1 {spec.name}")
+    parts = run_parallel(run_test, [(c,) for c in chunks], episodes * len(tests), workers, f"table1 {spec.name}")
+    results = merge_chunks(parts)
     table = summarise(results)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
             "delays_max_s": [t.delay_max_s for t in tests], "seed": seed, "workers": workers,

@@ -222,3 +222,19 @@ def test_policy_driver_acts_as_the_policy_modules():
     expected = np.clip(np.stack([mu_acc.numpy(), mu_sa.numpy()], 1), -1, 1) * ACTION_SCALE
     np.testing.assert_allclose(actions[active], expected, atol=1e-5)
     assert not actions[np.setdiff1d(np.arange(sim.num_slots), active)].any()
+
+
+def test_table1_chunks_of_a_test_are_summed():
+    from evaluation.table1 import merge_chunks, summarise
+
+    parts = [{"delay_max_s": 10.0, "counts": {"stop": {"goal": 3, "crash": 1}}, "speed_sum": {"stop": 32.0}},
+             {"delay_max_s": 20.0, "counts": {"none": {"goal": 2}}, "speed_sum": {"none": 16.0}},
+             {"delay_max_s": 10.0, "counts": {"stop": {"goal": 4}, "none": {"goal": 1}},
+              "speed_sum": {"stop": 28.0, "none": 9.0}}]
+    tests = merge_chunks(parts)
+    assert [t["delay_max_s"] for t in tests] == [10.0, 20.0]
+    assert tests[0]["counts"] == {"stop": {"goal": 7, "crash": 1}, "none": {"goal": 1}}
+    assert tests[0]["speed_sum"] == {"stop": 60.0, "none": 9.0}
+    table = summarise(tests)
+    assert table["stop"]["goal"] == pytest.approx(7 / 8) and table["stop"]["speed_mps"] == pytest.approx(7.5)
+    assert table["none"]["goal"] == 1.0 and table["none"]["episodes"] == 3
