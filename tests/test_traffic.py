@@ -124,7 +124,7 @@ def test_traffic_on_neighbouring_and_opposite_lanes_does_not_block():
     stopped_longest = np.zeros(sim.num_vehicles)
     stopped = np.zeros(sim.num_vehicles)
     for _ in range(1500):  # 150 s of busy main road, no learner on the road
-        result = sim.step(np.zeros((sim.num_slots, 2)))
+        sim.step(np.zeros((sim.num_slots, 2)))
         traffic = sim.num_slots + np.flatnonzero(sim.present[sim.num_slots:])
         standing = np.zeros(sim.num_vehicles, dtype=bool)
         standing[traffic] = sim.speed[traffic] < 0.1
