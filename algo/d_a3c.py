@@ -35,6 +35,48 @@ class DA3CConfig:
     local_learning_rate: float = 1e-3  # SGD step on the agent's local copy
     value_coef: float = 0.5  # weight of the value losses against the policy losses
     max_grad_norm: float = 40.0  # clip each local gradient to this L2 norm
+    # AR(1) coefficient of each car's acceleration noise per 0.1 s step: 0 draws fresh noise every
+    # step (the paper); 0.95 keeps a deviation for about 2 s, so a car sometimes brakes or speeds
+    # up for long enough to change who reaches a conflict zone first (see ``ExplorationNoise``)
+    noise_correlation: float = 0.0
+
+
+class ExplorationNoise:
+    """Per-car Gaussian exploration noise on the acceleration, optionally correlated in time.
+
+    The acceleration noise is AR(1): eps_t = rho * eps_{t-1} + sqrt(1 - rho^2) * sigma * xi_t,
+    so each step's noise has standard deviation sigma whatever rho (a new car starts from the
+    stationary law). The steering noise stays independent (rho = 0): a held steering error only
+    takes the car off its path. The previous noise is part of the car's state, so given it the
+    action is Gaussian around mu_t + rho * eps_{t-1} with standard deviation
+    sigma * sqrt(1 - rho^2): ``step`` returns the fresh part, and the policy gradient uses
+    ``log_prob_sigmas`` (paper, eq. 4 with that sigma). rho = 0 is the paper's noise.
+    """
+
+    def __init__(self, slots: int, acceleration_correlation: float, rng: np.random.Generator):
+        if not 0.0 <= acceleration_correlation < 1.0:
+            raise ValueError(f"noise correlation must be in [0, 1), got {acceleration_correlation}")
+        self.correlation = np.array([acceleration_correlation, 0.0], np.float32)  # acc, sa
+        self.innovation_scale = np.sqrt(1.0 - self.correlation ** 2).astype(np.float32)
+        self._rng = rng
+        self.noise = np.zeros((slots, 2), np.float32)
+
+    def start(self, slot: int, sigma: float) -> None:
+        """A new episode on ``slot``: noise from the stationary law N(0, sigma^2)."""
+        if self.correlation.any():  # independent noise never reads it (and keeps its random stream)
+            self.noise[slot] = sigma * self._rng.standard_normal(2)
+
+    def step(self, slots: list[int], sigma: float) -> tuple[np.ndarray, np.ndarray]:
+        """Advance the noise of ``slots``; returns (noise [len, 2], its fresh part [len, 2])."""
+        innovation = (self.innovation_scale * sigma
+                      * self._rng.standard_normal((len(slots), 2))).astype(np.float32)
+        noise = self.correlation * self.noise[slots] + innovation
+        self.noise[slots] = noise
+        return noise, innovation
+
+    def log_prob_sigmas(self, sigma: float) -> tuple[float, float]:
+        """Standard deviation of each action (acc, sa) given the car's previous noise."""
+        return float(sigma * self.innovation_scale[0]), float(sigma * self.innovation_scale[1])
 
 
 # -- returns and losses (small pure functions, tested against hand-computed numbers) -------------
@@ -125,8 +167,10 @@ class EpisodeLearner:
         self.rewards[self.length] = (reward_acc, reward_sa)
         self.length += 1
 
-    def update(self, sigma: float, terminal: bool) -> None:
+    def update(self, sigma: float | tuple[float, float], terminal: bool) -> None:
         """Local D-A3C step over the stored segment; the next observation is at index ``length``.
+
+        ``sigma``: the sampling standard deviation, one for both heads or (acc, sa).
 
         Same gradient as autograd through ``Policy`` on the whole segment (tests check it), but
         the first layer's forward pass comes from acting; only the bootstrap observation needs it.
@@ -146,7 +190,9 @@ class EpisodeLearner:
         boot = (0.0, 0.0) if terminal else values[n].tolist()
         actions = torch.from_numpy(self.actions[:n])
         rewards = torch.from_numpy(self.rewards[:n])
-        acc, sa = (stream_loss(mu[:n, h], values[:n, h], actions[:, h], rewards[:, h], boot[h], cfg.gamma, sigma)
+        sigmas = (sigma, sigma) if isinstance(sigma, (int, float)) else sigma
+        acc, sa = (stream_loss(mu[:n, h], values[:n, h], actions[:, h], rewards[:, h], boot[h], cfg.gamma,
+                               sigmas[h])
                    for h in range(2))
         loss = acc.policy + sa.policy + cfg.value_coef * (acc.value + sa.value)
         loss.backward()
@@ -214,6 +260,7 @@ class ActorCore:
         self._spare: list[EpisodeLearner] = []
         self._result: StepResult | None = None
         self.agent_steps = 0
+        self.noise = ExplorationNoise(sim.num_slots, config.noise_correlation, self._rng)
 
     # weights ------------------------------------------------------------------------------------
 
@@ -265,6 +312,7 @@ class ActorCore:
             learner = self._new_learner(slot)
             learner.observe(result.views[slot], result.scalars[slot])
             self._learners[slot] = learner
+            self.noise.start(slot, self.sigma)
 
     def means(self, active: list[int]) -> np.ndarray:
         """Gaussian means [slots, 2] of the cars on ``active`` slots, each from its own weights.
@@ -287,17 +335,26 @@ class ActorCore:
         return means
 
     def act(self) -> tuple[np.ndarray, np.ndarray]:
-        """Sample actions for every car on the road: (normalised samples, simulator actions)."""
+        """Sample actions for every car on the road.
+
+        Returns (what the policy gradient sees: mu plus this step's fresh noise, in normalised
+        units; simulator actions: mu plus all the noise, clipped and scaled). Without noise
+        correlation both are the same sample.
+        """
+        centred = np.zeros((self.sim.num_slots, 2), np.float32)
         samples = np.zeros((self.sim.num_slots, 2), np.float32)
         active = [slot for slot, learner in enumerate(self._learners) if learner is not None]
         if active:
-            noise = self._rng.standard_normal((len(active), 2)).astype(np.float32)
-            samples[active] = self.means(active)[active] + self.sigma * noise
-        return samples, np.clip(samples, -1.0, 1.0) * ACTION_SCALE
+            means = self.means(active)[active]
+            noise, innovation = self.noise.step(active, self.sigma)
+            samples[active] = means + noise
+            centred[active] = means + innovation
+        return centred, np.clip(samples, -1.0, 1.0) * ACTION_SCALE
 
     def step(self) -> list[FinishedEpisode]:
         """One simulator step for every agent, local updates where due; returns ended episodes."""
         samples, env_actions = self.act()
+        update_sigmas = self.noise.log_prob_sigmas(self.sigma)
         result = self.sim.step(env_actions)
         finished: list[FinishedEpisode] = []
         summaries = {e.slot: e for e in result.episodes}
@@ -308,7 +365,7 @@ class ActorCore:
             ended = bool(result.terminated[slot] or result.truncated[slot])
             learner.observe(result.views[slot], result.scalars[slot])
             if ended or learner.length >= self.config.update_interval:
-                learner.update(self.sigma, terminal=bool(result.terminated[slot]))
+                learner.update(update_sigmas, terminal=bool(result.terminated[slot]))
             if ended:
                 finished.append(self._finish(slot, learner, summaries[slot]))
         self._admit(result)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from algo.d_a3c import ActorCore, DA3CConfig, EpisodeLearner, gaussian_log_prob, n_step_returns, stream_loss
+from algo.d_a3c import (ActorCore, DA3CConfig, EpisodeLearner, ExplorationNoise, gaussian_log_prob, n_step_returns,
+                        stream_loss)
 from algo.policy import Policy, preprocess, sigma_at
 from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
 from learner.core import LearnerConfig, LearnerCore, StaleGradient
@@ -116,6 +117,55 @@ def test_actor_core_sums_local_gradients_per_episode():
         assert norm > 0.0
         assert set(episode.gradients) == set(learner.shapes)
         learner.apply(episode.gradients, episode.base_version, episode.agent_steps)
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.95])
+def test_exploration_noise_keeps_sigma_and_holds_only_the_acceleration(rho):
+    """Each step's noise has std sigma whatever rho; acceleration noise has lag-1 correlation rho,
+    steering noise none; the fresh part is what is left after the known offset rho * eps_{t-1}."""
+    slots, steps, sigma = 200, 400, 0.5
+    noise = ExplorationNoise(slots, rho, np.random.default_rng(0))
+    for slot in range(slots):
+        noise.start(slot, sigma)
+    history = np.zeros((steps, slots, 2))
+    previous = noise.noise.copy()
+    for t in range(steps):
+        eps, fresh = noise.step(list(range(slots)), sigma)
+        np.testing.assert_allclose(eps - fresh, rho * previous * np.array([1.0, 0.0]), atol=1e-6)
+        previous = eps.copy()
+        history[t] = eps
+    np.testing.assert_allclose(history.std(axis=(0, 1)), [sigma, sigma], rtol=0.03)
+    lag1 = [np.corrcoef(history[:-1, :, h].ravel(), history[1:, :, h].ravel())[0, 1] for h in range(2)]
+    assert abs(lag1[0] - rho) < 0.02 and abs(lag1[1]) < 0.02
+    acc_sigma, sa_sigma = noise.log_prob_sigmas(sigma)
+    assert acc_sigma == pytest.approx(sigma * math.sqrt(1 - rho * rho)) and sa_sigma == pytest.approx(sigma)
+    with pytest.raises(ValueError, match=r"\[0, 1\)"):
+        ExplorationNoise(1, 1.0, np.random.default_rng(0))
+
+
+def test_actor_with_correlated_noise_learns_from_the_fresh_part_of_each_action():
+    """The env gets mu + eps_t (clipped); the policy gradient sees mu + fresh noise, with the
+    conditional sigma; with rho = 0 both are the same sample, as in the paper."""
+    for rho in (0.0, 0.9):
+        sim = Simulator("easy", SimConfig(delay_max_s=0.0), seed=1)
+        core = ActorCore(sim, config=DA3CConfig(update_interval=5, noise_correlation=rho), seed=1)
+        core.set_weights(0, 0.4, LearnerCore().weights())
+        core.reset()
+        active = [slot for slot, learner in enumerate(core._learners) if learner is not None]
+        previous = core.noise.noise[active].copy()
+        centred, env_actions = core.act()
+        means = core.means(active)[active]
+        sent = np.clip(means + core.noise.noise[active], -1.0, 1.0) * np.array([3.0, 0.2])
+        np.testing.assert_allclose(env_actions[active], sent, atol=1e-5)
+        fresh = core.noise.noise[active] - rho * previous * np.array([1.0, 0.0])
+        np.testing.assert_allclose(centred[active], means + fresh, atol=1e-5)
+        if rho == 0.0:
+            np.testing.assert_allclose(np.clip(centred[active], -1, 1) * np.array([3.0, 0.2]), env_actions[active],
+                                       atol=1e-5)
+        finished = []
+        for _ in range(60):
+            finished += core.step()
+        assert finished and all(np.isfinite(f.mean_losses).all() for f in finished)
 
 
 def test_agents_hold_their_own_weights_and_batched_acting_matches_one_by_one():

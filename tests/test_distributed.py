@@ -141,7 +141,7 @@ def test_train_command_smoke(tmp_path):
     run_dir = tmp_path / "run"
     result = subprocess.run(
         [sys.executable, "-m", "crossway", "train", "--scenario", "easy", "--actors", "1", "--minutes", "0.4",
-         "--run-dir", str(run_dir), "--metrics-port", "0", "--delay-max", "0.5"],
+         "--run-dir", str(run_dir), "--metrics-port", "0", "--delay-max", "0.5", "--noise-correlation", "0.9"],
         capture_output=True, text=True, timeout=180,
     )
     assert result.returncode == 0, result.stderr
@@ -152,10 +152,13 @@ def test_train_command_smoke(tmp_path):
     assert list((run_dir / "checkpoints").glob("ckpt-*.pt"))
 
 
-def test_train_rejects_bad_arguments(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "crossway", "train", "--actors", "0", "--run-dir", str(tmp_path)],
-                            capture_output=True, text=True, timeout=60)
-    assert result.returncode == 2 and "--actors" in result.stderr
+@pytest.mark.parametrize("bad, message", [(("--actors", "0"), "--actors"),
+                                          (("--noise-correlation", "1.0"), "--noise-correlation must be in [0, 1)")])
+def test_train_rejects_bad_arguments(tmp_path, bad, message):
+    result = subprocess.run([sys.executable, "-m", "crossway", "train", *bad, "--run-dir", str(tmp_path / "run"),
+                             "--metrics-port", "0"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and message in result.stderr
+    assert not (tmp_path / "run").exists()  # refused before anything started
 
 
 def test_bad_pushes_are_counted_by_reason_and_metrics_are_served(tmp_path):

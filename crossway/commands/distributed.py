@@ -65,6 +65,10 @@ def _add_actor_options(parser: argparse.ArgumentParser) -> None:
                         help="longest wait between an agent's episodes [s]; default: the scenario's")
     parser.add_argument("--update-interval", type=int, default=20,
                         help="steps between an agent's local D-A3C updates")
+    parser.add_argument("--noise-correlation", type=float, default=0.0, metavar="RHO",
+                        help="AR(1) coefficient of each car's acceleration noise per 0.1 s step, in [0, 1): "
+                             "0 draws fresh noise every step (the paper); 0.95 holds a deviation for about "
+                             "2 s, so cars explore braking long enough to give way (docs/training.md)")
 
 
 def add_parser(subparsers) -> None:
@@ -163,11 +167,13 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
     load_scenario(args.scenario)  # fail here, with the scenario's own message
     if args.update_interval < 1:
         raise ValueError(f"--update-interval must be >= 1, got {args.update_interval}")
+    if not 0.0 <= args.noise_correlation < 1.0:
+        raise ValueError(f"--noise-correlation must be in [0, 1), got {args.noise_correlation}")
     sim = SimConfig(lanes=lanes, delay_max_s=delay_max, delay_min_s=0.0 if delay_max is not None else None)
     return ActorServiceConfig(
         scenario=args.scenario, run_name=args.run_name, transport=_transport(args, (), connect),
         actor_id=actor_id, seed=seed, sim=sim,
-        da3c=DA3CConfig(update_interval=args.update_interval),
+        da3c=DA3CConfig(update_interval=args.update_interval, noise_correlation=args.noise_correlation),
     )
 
 
@@ -238,7 +244,6 @@ def run_train_command(args) -> int:
         raise ValueError(f"--minutes must be > 0, got {args.minutes}")
     port = args.port or _free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    args.run_dir.mkdir(parents=True, exist_ok=True)
     lane_names = [lane.name for lane in build_intersection(load_scenario(args.scenario)).lanes]
     delay_max = args.delay_max
     if args.curriculum == "single" and delay_max is None:
@@ -248,6 +253,7 @@ def run_train_command(args) -> int:
     for i in range(args.actors):
         lanes = (lane_names[i % len(lane_names)],) if args.curriculum == "single" else None
         actor_cfgs.append(actor_config(args, (endpoint,), lanes, args.seed + i, f"local-{i}", delay_max))
+    args.run_dir.mkdir(parents=True, exist_ok=True)  # only once every option has been checked
 
     context = multiprocessing.get_context("spawn")  # Zenoh sessions do not survive fork
     learner = context.Process(target=_child_learner, args=(learner_cfg,), name="crossway-learner")
