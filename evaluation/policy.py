@@ -42,16 +42,20 @@ class PolicyDriver:
         self._first_layer = first_layer_matrix(weights)
         self._params = {name: w.unsqueeze(0) for name, w in weights.items()}  # one weight set
 
+    def heads(self, views: np.ndarray, scalars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Means and values [B, 2] (acc, sa) for uint8 views [B, 16, 84, 84] and speeds [B, 2] m/s."""
+        with torch.no_grad():
+            pre1 = conv1(patches(torch.from_numpy(np.ascontiguousarray(views))), *self._first_layer)
+            speeds = torch.from_numpy(np.ascontiguousarray(scalars, dtype=np.float32))
+            mu, values = after_conv1(pre1[None], speeds[None], self._params)
+        return mu[0].numpy().astype(np.float64), values[0].numpy().astype(np.float64)
+
     def act(self, result) -> np.ndarray:
         actions = np.zeros((self.sim.num_slots, 2))
         active = np.flatnonzero(self.sim.learners_present)
         if len(active) == 0:
             return actions
-        with torch.no_grad():
-            pre1 = conv1(patches(torch.from_numpy(result.views[active])), *self._first_layer)
-            scalars = torch.from_numpy(np.ascontiguousarray(result.scalars[active], dtype=np.float32))
-            mu, _ = after_conv1(pre1[None], scalars[None], self._params)
-        means = mu[0].numpy().astype(np.float64)
+        means, _ = self.heads(result.views[active], result.scalars[active])
         if self.sigma > 0:
             means = means + self.sigma * self._rng.standard_normal(means.shape)
         actions[active] = np.clip(means, -1.0, 1.0) * ACTION_SCALE

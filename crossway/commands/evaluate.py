@@ -54,6 +54,20 @@ def add_parser(subparsers) -> None:
     _add_run_options(ttc, episodes=200, episodes_help="ego episodes per (level, delay) cell")
     ttc.set_defaults(func=run_ttc_command)
 
+    reaction = experiments.add_parser(
+        "reaction", help="probe: does the policy slow down for the cars it must give way to?",
+        description="Drive the scenario with the policy and, whenever a car approaches a conflict zone that a car "
+                    "with priority over it has not cleared (and sees that car), run the network again with the "
+                    "priority cars erased from its obstacle view. Reports how much they lower the commanded "
+                    "acceleration and the value (docs/evaluation.md#reaction). Not one of the paper's "
+                    "experiments: a diagnosis of what Table I's crash rate cannot show.", formatter_class=fmt)
+    reaction.add_argument("--checkpoint", type=Path, required=True, help="learner checkpoint or exported policy")
+    reaction.add_argument("--scenario", default="easy", help="easy, medium, hard or a TOML path")
+    reaction.add_argument("--delay-max", type=float, default=10.0, metavar="SECONDS",
+                          help="longest wait between a car's episodes [s] (10: Table I's densest test)")
+    _add_run_options(reaction, episodes=500, episodes_help="episodes")
+    reaction.set_defaults(func=run_reaction_command)
+
     export = experiments.add_parser(
         "export", help="copy a checkpoint's policy alone into a small file (for models/)",
         description="Keep only the network sizes, the weights and their provenance (version, agent-steps, run "
@@ -114,6 +128,17 @@ def run_right_of_way_command(args) -> int:
                                _command_line())
     print(summary["markdown"], end="")
     print("wrote " + ", ".join(summary["paths"]) + f" in {summary['wall_s']} s")
+    return 0
+
+
+def run_reaction_command(args) -> int:
+    from evaluation.reaction import run_reaction
+
+    checkpoint = _checked(args)
+    report = run_reaction(args.scenario, checkpoint, args.episodes, args.delay_max, args.workers, args.seed,
+                          args.out, _command_line())
+    print(report["markdown"], end="")
+    print("wrote " + ", ".join(report["paths"]) + f" in {report['meta']['wall_s']} s")
     return 0
 
 
