@@ -39,6 +39,11 @@ class DA3CConfig:
     # step (the paper); 0.95 keeps a deviation for about 2 s, so a car sometimes brakes or speeds
     # up for long enough to change who reaches a conflict zone first (see ``ExplorationNoise``)
     noise_correlation: float = 0.0
+    # weight of a cost on the squared acceleration mean, acceleration_cost * mu_acc^2 per step
+    # (normalised units; not in the paper, 0 leaves it out). With the speed capped at the target
+    # speed every mean above "hold" is free, so without it mu_acc drifts to tanh's +1, where the
+    # exploration noise almost never brakes and tanh's slope is ~0 (docs/training.md#giving-way)
+    acceleration_cost: float = 0.0
 
 
 class ExplorationNoise:
@@ -195,6 +200,8 @@ class EpisodeLearner:
                                sigmas[h])
                    for h in range(2))
         loss = acc.policy + sa.policy + cfg.value_coef * (acc.value + sa.value)
+        if cfg.acceleration_cost > 0.0:
+            loss = loss + cfg.acceleration_cost * mu[:n, 0].square().sum()
         loss.backward()
         grads = {name: leaf.grad for name, leaf in leaves.items()}
         grads.update(conv1_gradients(self.patches[:n], pre1.grad[:n], self.params["acc.conv1.weight"].shape))

@@ -223,15 +223,19 @@ def test_matrix_form_of_the_network_matches_the_modules():
             torch.testing.assert_close(values[b], torch.stack([v_acc, v_sa], 1), atol=1e-5, rtol=1e-4)
 
 
-@pytest.mark.parametrize("terminal, max_grad_norm", [(False, 1e9), (True, 1e9), (False, 0.5)])
-def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max_grad_norm):
+@pytest.mark.parametrize("terminal, max_grad_norm, cost, sigma", [
+    (False, 1e9, 0.0, 0.4), (True, 1e9, 0.0, 0.4), (False, 0.5, 0.0, 0.4), (False, 1e9, 0.3, (0.15, 0.4))])
+def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max_grad_norm, cost, sigma):
     """The update that reuses acting's first layer gives autograd's gradient on the whole segment,
-    clipping included, and moves the local weights by -lr times it."""
+    clipping, the acceleration cost and per-head sigmas included, and moves the local weights by
+    -lr times it."""
     rng = np.random.default_rng(1)
     torch.manual_seed(1)
     policy = Policy()
-    config = DA3CConfig(update_interval=6, max_grad_norm=max_grad_norm, local_learning_rate=0.01)
-    n, sigma = 5, 0.4
+    config = DA3CConfig(update_interval=6, max_grad_norm=max_grad_norm, local_learning_rate=0.01,
+                        acceleration_cost=cost)
+    n = 5
+    sigmas = (sigma, sigma) if isinstance(sigma, float) else sigma
     params = {name: p.detach().clone() for name, p in policy.named_parameters()}
     start = {name: p.clone() for name, p in params.items()}
     learner = EpisodeLearner(
@@ -255,9 +259,9 @@ def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max
     mu_acc, v_acc, mu_sa, v_sa = torch.func.functional_call(policy, leaves, (views, scalars))
     boot = (0.0, 0.0) if terminal else (float(v_acc[n].detach()), float(v_sa[n].detach()))
     a, r = torch.from_numpy(actions), torch.from_numpy(rewards)
-    acc = stream_loss(mu_acc[:n], v_acc[:n], a[:, 0], r[:, 0], boot[0], config.gamma, sigma)
-    sa = stream_loss(mu_sa[:n], v_sa[:n], a[:, 1], r[:, 1], boot[1], config.gamma, sigma)
-    (acc.policy + sa.policy + config.value_coef * (acc.value + sa.value)).backward()
+    acc = stream_loss(mu_acc[:n], v_acc[:n], a[:, 0], r[:, 0], boot[0], config.gamma, sigmas[0])
+    sa = stream_loss(mu_sa[:n], v_sa[:n], a[:, 1], r[:, 1], boot[1], config.gamma, sigmas[1])
+    (acc.policy + sa.policy + config.value_coef * (acc.value + sa.value) + cost * mu_acc[:n].square().sum()).backward()
     torch.nn.utils.clip_grad_norm_(list(leaves.values()), max_grad_norm)
     for name, leaf in leaves.items():
         torch.testing.assert_close(learner.grad_sum[name], leaf.grad, atol=1e-5, rtol=1e-3)

@@ -141,7 +141,8 @@ def test_train_command_smoke(tmp_path):
     run_dir = tmp_path / "run"
     result = subprocess.run(
         [sys.executable, "-m", "crossway", "train", "--scenario", "easy", "--actors", "1", "--minutes", "0.4",
-         "--run-dir", str(run_dir), "--metrics-port", "0", "--delay-max", "0.5", "--noise-correlation", "0.9"],
+         "--run-dir", str(run_dir), "--metrics-port", "0", "--delay-max", "0.5", "--noise-correlation", "0.9",
+         "--acceleration-cost", "0.02"],
         capture_output=True, text=True, timeout=180,
     )
     assert result.returncode == 0, result.stderr
@@ -153,7 +154,8 @@ def test_train_command_smoke(tmp_path):
 
 
 @pytest.mark.parametrize("bad, message", [(("--actors", "0"), "--actors"),
-                                          (("--noise-correlation", "1.0"), "--noise-correlation must be in [0, 1)")])
+                                          (("--noise-correlation", "1.0"), "--noise-correlation must be in [0, 1)"),
+                                          (("--acceleration-cost", "-1"), "--acceleration-cost must be >= 0")])
 def test_train_rejects_bad_arguments(tmp_path, bad, message):
     result = subprocess.run([sys.executable, "-m", "crossway", "train", *bad, "--run-dir", str(tmp_path / "run"),
                              "--metrics-port", "0"], capture_output=True, text=True, timeout=60)
