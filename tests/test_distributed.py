@@ -155,7 +155,8 @@ def test_train_command_smoke(tmp_path):
 
 @pytest.mark.parametrize("bad, message", [(("--actors", "0"), "--actors"),
                                           (("--noise-correlation", "1.0"), "--noise-correlation must be in [0, 1)"),
-                                          (("--acceleration-cost", "-1"), "--acceleration-cost must be >= 0")])
+                                          (("--acceleration-cost", "-1"), "--acceleration-cost must be >= 0"),
+                                          (("--value-coef", "0"), "--value-coef must be > 0")])
 def test_train_rejects_bad_arguments(tmp_path, bad, message):
     result = subprocess.run([sys.executable, "-m", "crossway", "train", *bad, "--run-dir", str(tmp_path / "run"),
                              "--metrics-port", "0"], capture_output=True, text=True, timeout=60)

@@ -69,6 +69,8 @@ def _add_actor_options(parser: argparse.ArgumentParser) -> None:
                         help="AR(1) coefficient of each car's acceleration noise per 0.1 s step, in [0, 1): "
                              "0 draws fresh noise every step (the paper); 0.95 holds a deviation for about "
                              "2 s, so cars explore braking long enough to give way (docs/training.md)")
+    parser.add_argument("--value-coef", type=float, default=0.5, metavar="COEF",
+                        help="weight of the value losses against the policy losses in each local update")
     parser.add_argument("--acceleration-cost", type=float, default=0.0, metavar="COEF",
                         help="weight of a cost on the squared acceleration mean per step (not in the paper; 0: "
                              "off); keeps the mean near 'hold' at the speed cap instead of full throttle, so "
@@ -173,6 +175,8 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         raise ValueError(f"--update-interval must be >= 1, got {args.update_interval}")
     if not 0.0 <= args.noise_correlation < 1.0:
         raise ValueError(f"--noise-correlation must be in [0, 1), got {args.noise_correlation}")
+    if not args.value_coef > 0.0:
+        raise ValueError(f"--value-coef must be > 0, got {args.value_coef}")
     if not args.acceleration_cost >= 0.0:
         raise ValueError(f"--acceleration-cost must be >= 0, got {args.acceleration_cost}")
     sim = SimConfig(lanes=lanes, delay_max_s=delay_max, delay_min_s=0.0 if delay_max is not None else None)
@@ -180,7 +184,7 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         scenario=args.scenario, run_name=args.run_name, transport=_transport(args, (), connect),
         actor_id=actor_id, seed=seed, sim=sim,
         da3c=DA3CConfig(update_interval=args.update_interval, noise_correlation=args.noise_correlation,
-                        acceleration_cost=args.acceleration_cost),
+                        acceleration_cost=args.acceleration_cost, value_coef=args.value_coef),
     )
 
 
