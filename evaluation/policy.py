@@ -51,12 +51,18 @@ class PolicyDriver:
         return mu[0].numpy().astype(np.float64), values[0].numpy().astype(np.float64)
 
     def act(self, result) -> np.ndarray:
+        """Actions [slots, 2] (m/s^2, rad) for the cars on the road; zeros elsewhere."""
+        return self.act_with_values(result)[0]
+
+    def act_with_values(self, result) -> tuple[np.ndarray, np.ndarray]:
+        """``act``'s actions and the value estimates [slots, 2] (v_acc, v_sa) they were taken with."""
         actions = np.zeros((self.sim.num_slots, 2))
+        values = np.zeros((self.sim.num_slots, 2))
         active = np.flatnonzero(self.sim.learners_present)
         if len(active) == 0:
-            return actions
-        means, _ = self.heads(result.views[active], result.scalars[active])
+            return actions, values
+        means, values[active] = self.heads(result.views[active], result.scalars[active])
         if self.sigma > 0:
             means = means + self.sigma * self._rng.standard_normal(means.shape)
         actions[active] = np.clip(means, -1.0, 1.0) * ACTION_SCALE
-        return actions
+        return actions, values

@@ -17,6 +17,11 @@ between the two outputs is how much the priority cars change what the car does:
 A policy that has learned the rule slows for priority cars (a large gap, most steps give way);
 a blind one does the same with and without them (gap near zero). Table I cannot tell these apart
 from a crash rate alone.
+
+The probe also asks whether the acceleration head's critic sees danger coming: over every step
+of every finished episode, the area under the ROC curve of -v_acc as a score for "this car
+crashes within the next ``RISK_HORIZON_STEPS`` steps" (0.5: the value says nothing about crashes;
+1: every step before a crash has a lower value than every other step).
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ OBSTACLE_PLANES = slice(8, 12)  # channel 2 (obstacles), frames 0-3, in the [16,
 NEWEST_OBSTACLE_PLANE = 11
 HIGHER_PRIORITY_CODE = 128  # simcore.views.HIGHER_PRIORITY
 CHUNK_EPISODES = 100
+RISK_HORIZON_STEPS = 20  # "about to crash": within this many 0.1 s steps of the crash
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,23 @@ def encounter_slots(sim) -> list[int]:
     return found
 
 
+def roc_auc(scores: np.ndarray, labels: np.ndarray) -> float | None:
+    """Area under the ROC curve (Mann-Whitney, ties at their mean rank); None without both classes."""
+    labels = np.asarray(labels, dtype=bool)
+    positives, negatives = int(labels.sum()), int((~labels).sum())
+    if positives == 0 or negatives == 0:
+        return None
+    order = np.argsort(scores, kind="mergesort")
+    ranks = np.empty(len(scores))
+    ranks[order] = np.arange(1, len(scores) + 1)
+    sorted_scores = np.asarray(scores)[order]
+    # average the ranks of tied scores
+    _, first, counts = np.unique(sorted_scores, return_index=True, return_counts=True)
+    for start, count in zip(first[counts > 1], counts[counts > 1]):
+        ranks[order[start:start + count]] = start + (count + 1) / 2.0
+    return float((ranks[labels].sum() - positives * (positives + 1) / 2.0) / (positives * negatives))
+
+
 def erase_priority_cars(views: np.ndarray) -> np.ndarray:
     """Copies of ``views`` [B, 16, 84, 84] with every black (priority) pixel of the obstacle planes cleared."""
     erased = views.copy()
@@ -88,6 +111,8 @@ def run_probe(spec: ProbeSpec, progress=None) -> dict:
     driver = PolicyDriver(sim, load_policy(spec.checkpoint))
     result = sim.reset()
     acceleration, value = [], []  # rows: (with, without)
+    episode_values: dict[int, list[float]] = {}  # slot -> v_acc at each step of its episode
+    risk_scores, risk_labels = [], []
     done = 0
     while done < spec.episodes:
         slots = [s for s in encounter_slots(sim)
@@ -100,23 +125,41 @@ def run_probe(spec: ProbeSpec, progress=None) -> dict:
             mu_acc = np.clip(mu[:, 0], -1.0, 1.0).reshape(-1, 2) * float(ACTION_SCALE[0])
             acceleration.extend(mu_acc.tolist())
             value.extend(values[:, 0].reshape(-1, 2).tolist())
-        result = sim.step(driver.act(result))
+        actions, values_now = driver.act_with_values(result)
+        for slot in np.flatnonzero(sim.learners_present).tolist():
+            episode_values.setdefault(slot, []).append(float(values_now[slot, 0]))
+        result = sim.step(actions)
+        for episode in result.episodes:
+            history = episode_values.pop(episode.slot, [])
+            if episode.end_reason not in OUTCOMES:
+                continue  # cut short: its outcome is unknown
+            labels = np.zeros(len(history), dtype=bool)
+            if episode.end_reason == "crash":
+                labels[-RISK_HORIZON_STEPS:] = True
+            risk_scores.extend(-v for v in history)
+            risk_labels.extend(labels.tolist())
         finished = sum(1 for e in result.episodes if e.end_reason in OUTCOMES)
         done += finished
         if progress is not None and finished:
             progress.put(finished)
-    return {"acceleration": acceleration, "value": value, "episodes": done}
+    return {"acceleration": acceleration, "value": value, "episodes": done,
+            "risk_scores": risk_scores, "risk_labels": risk_labels}
 
 
 def summarise(parts: list[dict]) -> dict:
     acceleration = np.array([row for p in parts for row in p["acceleration"]]).reshape(-1, 2)
     value = np.array([row for p in parts for row in p["value"]]).reshape(-1, 2)
     n = len(acceleration)
+    labels = np.array([label for p in parts for label in p["risk_labels"]], dtype=bool)
+    auc = roc_auc(np.array([score for p in parts for score in p["risk_scores"]]), labels)
+    risk = {"steps": len(labels), "steps_before_a_crash": int(labels.sum()),
+            "value_crash_auc": None if auc is None else round(auc, 4)}
     if n == 0:
-        return {"encounter_steps": 0, "episodes": sum(p["episodes"] for p in parts)}
+        return {"encounter_steps": 0, "episodes": sum(p["episodes"] for p in parts), "risk": risk}
     drop = acceleration[:, 1] - acceleration[:, 0]  # how much the priority cars lower the command
     return {
         "episodes": sum(p["episodes"] for p in parts),
+        "risk": risk,
         "encounter_steps": n,
         "acceleration_with_mps2": round(float(acceleration[:, 0].mean()), 4),
         "acceleration_without_mps2": round(float(acceleration[:, 1].mean()), 4),
@@ -132,9 +175,19 @@ def _number(value: float) -> str:
     return f"{round(value, 3) + 0.0:.3f}"  # + 0.0: no "-0.000"
 
 
+def _risk_line(risk: dict) -> str:
+    if risk["value_crash_auc"] is None:
+        return (f"Value and crashes: {risk['steps']} steps, {risk['steps_before_a_crash']} of them in the last "
+                f"{RISK_HORIZON_STEPS} steps before a crash: no AUC without both kinds.\n")
+    return (f"Value and crashes: over {risk['steps']} steps, -v_acc separates the {risk['steps_before_a_crash']} "
+            f"steps in the last {RISK_HORIZON_STEPS} before a crash from the others with ROC AUC "
+            f"{risk['value_crash_auc']:.3f} (0.5: the value does not see crashes coming).\n")
+
+
 def markdown(summary: dict) -> str:
     if not summary["encounter_steps"]:
-        return "No encounter steps: no car approached a zone with a priority car in view.\n"
+        return ("No encounter steps: no car approached a zone with a priority car in view.\n\n"
+                + _risk_line(summary["risk"]))
     return (
         "| | with priority cars | priority cars erased |\n|---|---|---|\n"
         f"| mean commanded acceleration [m/s^2] | {_number(summary['acceleration_with_mps2'])} | "
@@ -143,7 +196,7 @@ def markdown(summary: dict) -> str:
         f"{summary['encounter_steps']} encounter steps in {summary['episodes']} episodes. The priority cars "
         f"lower the commanded acceleration by {_number(summary['mean_drop_mps2'])} m/s^2 on average; the car gives "
         f"way (a drop of at least {GIVE_WAY_MIN_MPS2} m/s^2) at {100 * summary['give_way_fraction']:.1f}% of "
-        f"the steps and brakes at {100 * summary['braking_fraction']:.1f}%.\n"
+        f"the steps and brakes at {100 * summary['braking_fraction']:.1f}%.\n\n" + _risk_line(summary["risk"])
     )
 
 
@@ -163,7 +216,7 @@ def run_reaction(scenario: str, checkpoint: str, episodes: int, delay_max_s: flo
     summary = summarise(parts)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes": episodes, "delay_max_s": delay_max_s,
             "seed": seed, "workers": workers, "approach_window_m": APPROACH_WINDOW_M,
-            "give_way_min_mps2": GIVE_WAY_MIN_MPS2, "wall_s": round(time.monotonic() - started, 1),
+            "give_way_min_mps2": GIVE_WAY_MIN_MPS2, "risk_horizon_steps": RISK_HORIZON_STEPS, "wall_s": round(time.monotonic() - started, 1),
             "command": command}
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = out_dir / f"reaction-{spec.name}"

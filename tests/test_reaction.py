@@ -87,9 +87,21 @@ def test_reaction_end_to_end_and_a_refused_checkpoint(tmp_path):
         assert {"acceleration_with_mps2", "acceleration_without_mps2", "give_way_fraction",
                 "value_with", "value_without"} <= set(summary)
         assert -3.0 <= summary["acceleration_with_mps2"] <= 3.0
+    risk = summary["risk"]
+    assert risk["steps"] > 0 and 0 <= risk["steps_before_a_crash"] <= risk["steps"]
+    assert risk["value_crash_auc"] is None or 0.0 <= risk["value_crash_auc"] <= 1.0
     assert "# Reaction to priority cars, easy" in (tmp_path / "out" / "reaction-easy.md").read_text()
     bad = tmp_path / "bad.pt"
     bad.write_text("nope")
     refused = crossway("evaluate", "reaction", "--checkpoint", str(bad), "--out", str(tmp_path / "never"))
     assert refused.returncode != 0 and "is not a crossway checkpoint" in refused.stderr
     assert not (tmp_path / "never").exists()
+
+
+def test_roc_auc_by_hand():
+    from evaluation.reaction import roc_auc
+
+    assert roc_auc(np.array([0.1, 0.4, 0.35, 0.8]), np.array([0, 0, 1, 1])) == pytest.approx(0.75)
+    assert roc_auc(np.array([3.0, 2.0, 1.0]), np.array([1, 0, 0])) == pytest.approx(1.0)
+    assert roc_auc(np.array([1.0, 1.0, 1.0, 1.0]), np.array([1, 0, 1, 0])) == pytest.approx(0.5)  # ties
+    assert roc_auc(np.array([1.0, 2.0]), np.array([0, 0])) is None
