@@ -115,20 +115,18 @@ def run_probe(spec: ProbeSpec, progress=None) -> dict:
     risk_scores, risk_labels = [], []
     done = 0
     while done < spec.episodes:
+        actions, values_now = driver.act_with_values(result)  # the "with" pass: what the cars do
         slots = [s for s in encounter_slots(sim)
                  if (result.views[s, NEWEST_OBSTACLE_PLANE] == HIGHER_PRIORITY_CODE).any()]
         if slots:
-            views = result.views[slots]
-            scalars = np.repeat(result.scalars[slots], 2, axis=0)
-            both = np.stack([views, erase_priority_cars(views)], axis=1).reshape(-1, *views.shape[1:])
-            mu, values = driver.heads(both, scalars)
-            mu_acc = np.clip(mu[:, 0], -1.0, 1.0).reshape(-1, 2) * float(ACTION_SCALE[0])
-            acceleration.extend(mu_acc.tolist())
-            value.extend(values[:, 0].reshape(-1, 2).tolist())
-        actions, values_now = driver.act_with_values(result)
+            mu, values = driver.heads(erase_priority_cars(result.views[slots]), result.scalars[slots])
+            erased_acc = np.clip(mu[:, 0], -1.0, 1.0) * float(ACTION_SCALE[0])
+            acceleration.extend(zip(actions[slots, 0].tolist(), erased_acc.tolist()))
+            value.extend(zip(values_now[slots, 0].tolist(), values[:, 0].tolist()))
         for slot in np.flatnonzero(sim.learners_present).tolist():
             episode_values.setdefault(slot, []).append(float(values_now[slot, 0]))
         result = sim.step(actions)
+        finished = 0
         for episode in result.episodes:
             history = episode_values.pop(episode.slot, [])
             if episode.end_reason not in OUTCOMES:
@@ -138,7 +136,7 @@ def run_probe(spec: ProbeSpec, progress=None) -> dict:
                 labels[-RISK_HORIZON_STEPS:] = True
             risk_scores.extend(-v for v in history)
             risk_labels.extend(labels.tolist())
-        finished = sum(1 for e in result.episodes if e.end_reason in OUTCOMES)
+            finished += 1
         done += finished
         if progress is not None and finished:
             progress.put(finished)

@@ -15,19 +15,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from algo.policy import PolicyConfig, SubModule, preprocess  # noqa: E402
-from evaluation.policy import PolicyDriver, load_policy  # noqa: E402
-from evaluation.reaction import roc_auc  # noqa: E402
-from simcore.simulator import SimConfig, Simulator  # noqa: E402
+from algo.policy import PolicyConfig, SubModule, preprocess
+from evaluation.policy import PolicyDriver, load_policy
+from evaluation.reaction import roc_auc
+from simcore.simulator import SimConfig, Simulator
 
 
 def record(checkpoint: str, scenario: str, steps: int, delay_max_s: float, horizon: int, seed: int):
