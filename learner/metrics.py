@@ -72,3 +72,15 @@ class LearnerMetrics:
     @property
     def rolling_mean_speed(self) -> float:
         return sum(self._speeds) / len(self._speeds) if self._speeds else 0.0
+
+    def rolling_state(self) -> dict:
+        """The rolling windows, for a checkpoint (a resumed run's reach rate goes on from them)."""
+        return {"goals": list(self._goals), "speeds_mps": list(self._speeds)}
+
+    def restore_rolling(self, state: dict) -> None:
+        """Refill the rolling windows from ``rolling_state``'s output (a missing key: left empty)."""
+        self._goals.extend(bool(goal) for goal in state.get("goals", ()))
+        self._speeds.extend(float(speed) for speed in state.get("speeds_mps", ()))
+        if self._goals:
+            self.reach_rate.set(self.rolling_reach_rate)
+            self.mean_speed.set(self.rolling_mean_speed)

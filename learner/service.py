@@ -77,14 +77,20 @@ def newest_checkpoint(run_dir: Path) -> Path | None:
     return found[-1][1] if found else None
 
 
-def write_checkpoint(run_dir: Path, core: LearnerCore, run_id: str) -> Path:
-    """Atomic: write to a temporary file, fsync, rename; keep the newest few."""
+def write_checkpoint(run_dir: Path, core: LearnerCore, run_id: str, progress: dict | None = None) -> Path:
+    """Atomic: write to a temporary file, fsync, rename; keep the newest few.
+
+    ``progress``: the run's episode count and rolling windows, so that a resumed run's
+    progress.csv goes on where it stopped instead of restarting from an empty window.
+    """
     directory = run_dir / "checkpoints"
     directory.mkdir(parents=True, exist_ok=True)
     final = directory / f"ckpt-{core.version:09d}.pt"
     temporary = directory / f".{final.name}.{os.getpid()}.tmp"
     state = core.state_dict()
     state["run_id"] = run_id
+    if progress is not None:
+        state["progress"] = progress
     with open(temporary, "wb") as handle:
         torch.save(state, handle)
         handle.flush()
@@ -106,10 +112,14 @@ class LearnerService:
         self.run_id = uuid.uuid4().hex[:12]
         config.run_dir.mkdir(parents=True, exist_ok=True)
         checkpoint = newest_checkpoint(config.run_dir)
+        resumed_episodes = 0
         if checkpoint is not None:
             state = torch.load(checkpoint, weights_only=False)
             self.core.load_state_dict(state)
             self.run_id = state.get("run_id", self.run_id)
+            progress = state.get("progress", {})  # absent in checkpoints written before it existed
+            self.metrics.restore_rolling(progress.get("rolling", {}))
+            resumed_episodes = int(progress.get("episodes", 0))
             self.log(f"learner: resumed from {checkpoint} at version {self.core.version}")
         elif config.init_from is not None:
             self.core.init_weights(load_policy(config.init_from))
@@ -118,7 +128,7 @@ class LearnerService:
         self._stop = threading.Event()
         self._live_actors: set[str] = set()
         self._actor_events: deque[str] = deque(maxlen=1000)  # joins and leaves, logged by the main thread
-        self._episodes = 0
+        self._episodes = resumed_episodes
         self._rejected = 0
         self.pushes_by_actor: dict[str, int] = {}  # applied pushes per actor id (tests, logs)
         self.newest_base_version = -1  # newest weights version an applied push started from
@@ -213,7 +223,8 @@ class LearnerService:
         )
 
     def checkpoint(self) -> Path:
-        path = write_checkpoint(self.config.run_dir, self.core, self.run_id)
+        progress = {"episodes": self._episodes, "rolling": self.metrics.rolling_state()}
+        path = write_checkpoint(self.config.run_dir, self.core, self.run_id, progress)
         self.metrics.checkpoints.inc()
         return path
 

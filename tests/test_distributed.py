@@ -254,6 +254,29 @@ def test_a_new_run_starts_from_given_weights_and_a_resumed_run_ignores_them(tmp_
     np.testing.assert_array_equal(service.core.weights()["acc.hidden.weight"], resumed.weights()["acc.hidden.weight"])
 
 
+def test_a_resumed_run_goes_on_with_its_episode_count_and_rolling_reach_rate(tmp_path):
+    """progress.csv after a resume: no restart from an empty window (a dip to 0 in the curves)."""
+    config = LearnerServiceConfig(run_dir=tmp_path / "run", metrics_port=0,
+                                  transport=TransportConfig(listen=(f"tcp/127.0.0.1:{free_port()}",)))
+    first = LearnerService(config, log=lambda line: None)
+    for index in range(250):  # more than the window: the oldest fall out
+        reason = "goal" if index % 4 else "crash"
+        first.metrics.record_episode("easy", "none", reason, 5.0 + index % 3)
+        first._episodes += 1
+    before = first.status()
+    assert before.episodes == 250 and 0.0 < before.reach_rate < 1.0
+    first.checkpoint()
+    second = LearnerService(config, log=lambda line: None)
+    after = second.status()
+    assert after.episodes == 250
+    assert after.reach_rate == pytest.approx(before.reach_rate)
+    assert after.mean_speed_mps == pytest.approx(before.mean_speed_mps)
+    window = [index % 4 != 0 for index in range(50, 250)]  # the newest 200 before the checkpoint
+    assert after.reach_rate == pytest.approx(sum(window) / 200)
+    second.metrics.record_episode("easy", "none", "crash", 5.0)  # index 50 (a goal) drops out
+    assert second.status().reach_rate == pytest.approx((sum(window[1:]) + 0) / 200)
+
+
 def test_train_refuses_initial_weights_that_are_not_a_checkpoint(tmp_path):
     bogus = tmp_path / "bogus.pt"
     bogus.write_text("not a checkpoint")
