@@ -56,6 +56,11 @@ class ExplorationNoise:
     action is Gaussian around mu_t + rho * eps_{t-1} with standard deviation
     sigma * sqrt(1 - rho^2): ``step`` returns the fresh part, and the policy gradient uses
     ``log_prob_sigmas`` (paper, eq. 4 with that sigma). rho = 0 is the paper's noise.
+
+    For rho > 0 this is an approximation: eps_{t-1} = a_{t-1} - mu_{t-1} depends on the weights,
+    and the exact trajectory score would weight grad mu_t by (A_t xi_t - rho A_{t+1} xi_{t+1}).
+    Keeping the first term credits mu_t with a deviation that lasts ~1/(1-rho) steps
+    (docs/training.md, "--noise-correlation").
     """
 
     def __init__(self, slots: int, acceleration_correlation: float, rng: np.random.Generator):
