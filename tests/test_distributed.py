@@ -97,6 +97,21 @@ def test_an_actor_killed_mid_episode_leaves_the_learner_running(learner):
         stop(victim)
 
 
+def test_a_yield_drill_actor_drives_from_the_stop_arm_among_traffic(learner):
+    """--yield-drill: learners only on hard's stop-sign arm; IDM traffic on the main road."""
+    service, endpoint, _ = learner
+    actor = start_actor(endpoint, "drill", "--scenario", "hard", "--yield-drill")
+    try:
+        wait_for(lambda: service.pushes_by_actor.get("drill", 0) >= 6, 180, "the drill's pushes")
+    finally:
+        stop(actor)
+    assert service._rejected == 0
+    finished = {(s.labels["scenario"], s.labels["sign"]): s.value
+                for metric in service.metrics.episodes.collect() for s in metric.samples
+                if s.name.endswith("_total") and s.value > 0}
+    assert finished and set(finished) == {("hard", "stop")}  # every learner started at the stop sign
+
+
 def learner_process(run_dir: Path, endpoint: str) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "crossway", "learner", "--run-dir", str(run_dir), "--listen", endpoint,
@@ -156,7 +171,11 @@ def test_train_command_smoke(tmp_path):
 @pytest.mark.parametrize("bad, message", [(("--actors", "0"), "--actors"),
                                           (("--noise-correlation", "1.0"), "--noise-correlation must be in [0, 1)"),
                                           (("--acceleration-cost", "-1"), "--acceleration-cost must be >= 0"),
-                                          (("--value-coef", "0"), "--value-coef must be > 0")])
+                                          (("--value-coef", "0"), "--value-coef must be > 0"),
+                                          (("--curriculum", "yield", "--actors", "1", "--scenario", "hard"),
+                                           "--curriculum yield needs --actors 2"),
+                                          (("--curriculum", "yield", "--actors", "2", "--scenario", "easy"),
+                                           "the yield drill runs on the hard junction")])
 def test_train_rejects_bad_arguments(tmp_path, bad, message):
     result = subprocess.run([sys.executable, "-m", "crossway", "train", *bad, "--run-dir", str(tmp_path / "run"),
                              "--metrics-port", "0"], capture_output=True, text=True, timeout=60)

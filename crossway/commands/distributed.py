@@ -17,7 +17,11 @@ import sys
 import time
 from pathlib import Path
 
-CURRICULA = ("none", "single")
+CURRICULA = ("none", "single", "yield")
+YIELD_DRILL_TRAFFIC_CARS = 8  # the TTC test's "medium" traffic level
+YIELD_DRILL_TRAFFIC_DELAY_MAX_S = 40.0  # longest wait before a traffic car starts again [s]
+CURRICULUM_NOTES = {"none": "", "single": " (single-agent curriculum)",
+                    "yield": " (yield curriculum: odd-numbered actors drive the yield drill)"}
 
 
 def _add_common(parser: argparse.ArgumentParser) -> None:
@@ -103,6 +107,10 @@ def add_parser(subparsers) -> None:
     actor.add_argument("--id", default="", help="actor id (default: HOST-PID)")
     actor.add_argument("--seed", type=int, default=None, help="random seed (default: random)")
     actor.add_argument("--lanes", default="", help="comma-separated entry lanes that host agents (default: all)")
+    actor.add_argument("--yield-drill", action="store_true",
+                       help="drive the yield drill instead of the scenario (hard only): learners start from "
+                            "the stop-sign arm and must give way to IDM traffic on the two adjacent arms, "
+                            "as in the TTC test (docs/training.md)")
     _add_common(actor)
     _add_actor_options(actor)
     _add_tls(actor)
@@ -128,7 +136,9 @@ def add_parser(subparsers) -> None:
     train.add_argument("--run-dir", type=Path, default=Path("runs/default"), help="checkpoints and progress.csv")
     train.add_argument("--curriculum", choices=CURRICULA, default="none",
                        help="single: one agent per simulator and no traffic (path following only); "
-                            "actor i drives from entry lane i")
+                            "actor i drives from entry lane i. yield (hard only): odd-numbered actors drive "
+                            "the yield drill (learners on the stop-sign arm give way to IDM traffic), even "
+                            "ones the scenario as usual")
     train.add_argument("--seed", type=int, default=0, help="actor i uses seed + i")
     train.add_argument("--port", type=int, default=0, help="loopback TCP port of the learner (0: a free one)")
     _add_common(train)
@@ -163,8 +173,25 @@ def learner_config(args, listen: tuple[str, ...], connect: tuple[str, ...]):
     )
 
 
+def yield_drill_sim_config():
+    """The yield drill: the TTC test's setting (evaluation.ttc_test) as a training simulator.
+
+    Learners start from both lanes of hard's stop-sign arm (south); IDM traffic, which never
+    yields, comes from both lanes of the main road (east, west, no sign). Every car the learner
+    meets has priority over it, so each episode asks it to find a gap: the skill our policies
+    lack (docs/training.md#giving-way-why-our-agents-have-not-learned-it-yet).
+    """
+    from evaluation.ttc_test import EGO_LANES, EGO_WAIT_S, SIGNS, TRAFFIC_LANES
+    from simcore.simulator import SimConfig, TrafficConfig
+
+    traffic = TrafficConfig(lanes=TRAFFIC_LANES, max_cars=YIELD_DRILL_TRAFFIC_CARS, delay_min_s=0.0,
+                            delay_max_s=YIELD_DRILL_TRAFFIC_DELAY_MAX_S)
+    return SimConfig(lanes=EGO_LANES, signs=SIGNS, traffic=traffic, delay_min_s=EGO_WAIT_S[0],
+                     delay_max_s=EGO_WAIT_S[1], start_all_at_reset=False)
+
+
 def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, seed, actor_id: str,
-                 delay_max: float | None):
+                 delay_max: float | None, yield_drill: bool = False):
     from actors.worker import ActorServiceConfig
     from algo.d_a3c import DA3CConfig
     from simcore.scenario import load_scenario
@@ -179,7 +206,14 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         raise ValueError(f"--value-coef must be > 0, got {args.value_coef}")
     if not args.acceleration_cost >= 0.0:
         raise ValueError(f"--acceleration-cost must be >= 0, got {args.acceleration_cost}")
-    sim = SimConfig(lanes=lanes, delay_max_s=delay_max, delay_min_s=0.0 if delay_max is not None else None)
+    if yield_drill:
+        if load_scenario(args.scenario).name != "hard":
+            raise ValueError(f"the yield drill runs on the hard junction (the TTC test's arms), not {args.scenario!r}")
+        if lanes is not None:
+            raise ValueError("the yield drill chooses its own lanes: leave out --lanes")
+        sim = yield_drill_sim_config()
+    else:
+        sim = SimConfig(lanes=lanes, delay_max_s=delay_max, delay_min_s=0.0 if delay_max is not None else None)
     return ActorServiceConfig(
         scenario=args.scenario, run_name=args.run_name, transport=_transport(args, (), connect),
         actor_id=actor_id, seed=seed, sim=sim,
@@ -200,7 +234,8 @@ def run_actor_command(args) -> int:
     from protocol.transport import parse_endpoints
 
     lanes = tuple(x for x in args.lanes.split(",") if x) or None
-    return run_actor(actor_config(args, parse_endpoints(args.connect), lanes, args.seed, args.id, args.delay_max))
+    return run_actor(actor_config(args, parse_endpoints(args.connect), lanes, args.seed, args.id, args.delay_max,
+                                  yield_drill=args.yield_drill))
 
 
 def run_router_command(args) -> int:
@@ -253,6 +288,8 @@ def run_train_command(args) -> int:
         raise ValueError(f"--actors must be >= 1, got {args.actors}")
     if not args.minutes > 0:
         raise ValueError(f"--minutes must be > 0, got {args.minutes}")
+    if args.curriculum == "yield" and args.actors < 2:
+        raise ValueError("--curriculum yield needs --actors 2 or more (odd-numbered actors drive the drill)")
     port = args.port or _free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     lane_names = [lane.name for lane in build_intersection(load_scenario(args.scenario)).lanes]
@@ -263,7 +300,9 @@ def run_train_command(args) -> int:
     actor_cfgs = []
     for i in range(args.actors):
         lanes = (lane_names[i % len(lane_names)],) if args.curriculum == "single" else None
-        actor_cfgs.append(actor_config(args, (endpoint,), lanes, args.seed + i, f"local-{i}", delay_max))
+        drill = args.curriculum == "yield" and i % 2 == 1
+        actor_cfgs.append(actor_config(args, (endpoint,), lanes, args.seed + i, f"local-{i}", delay_max,
+                                       yield_drill=drill))
     args.run_dir.mkdir(parents=True, exist_ok=True)  # only once every option has been checked
 
     context = multiprocessing.get_context("spawn")  # Zenoh sessions do not survive fork
@@ -274,7 +313,7 @@ def run_train_command(args) -> int:
     for process in actors:
         process.start()
     print(f"train: learner on {endpoint}, {args.actors} actor(s) on {args.scenario}"
-          f"{' (single-agent curriculum)' if args.curriculum == 'single' else ''}, run dir {args.run_dir}",
+          f"{CURRICULUM_NOTES[args.curriculum]}, run dir {args.run_dir}",
           file=sys.stderr)
     if args.metrics_port:
         print(f"train: Prometheus metrics at http://127.0.0.1:{args.metrics_port}/metrics", file=sys.stderr)
