@@ -28,6 +28,18 @@ EGO_LANES = ("south_0", "south_1")
 EGO_WAIT_S = (0.0, 2.0)  # the ego's wait between its episodes [s]
 
 
+def ttc_setting(ego_lanes: tuple[str, ...], level: str, traffic_delay_max_s: float, observe: bool = True):
+    """The test's simulator options (hard only): learners on ``ego_lanes`` of the stop-sign arm,
+    at most TRAFFIC_LEVELS[level] IDM cars from the main road, each waiting 0 to
+    ``traffic_delay_max_s`` before it starts again. Also the yield drill's (``--curriculum yield``)."""
+    from simcore.simulator import SimConfig, TrafficConfig
+
+    traffic = TrafficConfig(lanes=TRAFFIC_LANES, max_cars=TRAFFIC_LEVELS[level], delay_min_s=0.0,
+                            delay_max_s=traffic_delay_max_s)
+    return SimConfig(lanes=ego_lanes, signs=SIGNS, traffic=traffic, delay_min_s=EGO_WAIT_S[0],
+                     delay_max_s=EGO_WAIT_S[1], observe=observe, start_all_at_reset=False)
+
+
 @dataclass(frozen=True)
 class TTCTest:
     driver: str  # "ttc" or "policy"
@@ -45,7 +57,7 @@ def run_ttc_test(test: TTCTest, progress=None) -> dict:
 
     from evaluation.policy import PolicyDriver, load_policy
     from evaluation.ttc import TTCDriver
-    from simcore.simulator import SimConfig, Simulator, TrafficConfig
+    from simcore.simulator import Simulator
 
     torch.set_num_threads(1)
     counts: Counter = Counter()
@@ -54,10 +66,7 @@ def run_ttc_test(test: TTCTest, progress=None) -> dict:
     for lane, episodes in zip(EGO_LANES, per_lane):
         if episodes == 0:
             continue
-        traffic = TrafficConfig(lanes=TRAFFIC_LANES, max_cars=TRAFFIC_LEVELS[test.level],
-                                delay_min_s=0.0, delay_max_s=test.delay_max_s)
-        config = SimConfig(lanes=(lane,), signs=SIGNS, traffic=traffic, delay_min_s=EGO_WAIT_S[0],
-                           delay_max_s=EGO_WAIT_S[1], observe=policy is not None, start_all_at_reset=False)
+        config = ttc_setting((lane,), test.level, test.delay_max_s, observe=policy is not None)
         sim = Simulator("hard", config, seed=test.seed + (lane == EGO_LANES[1]))
         result = sim.reset()
         driver = PolicyDriver(sim, policy) if policy is not None else TTCDriver(sim, test.threshold_s)

@@ -24,10 +24,11 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def start_actor(endpoint: str, actor_id: str, *extra) -> subprocess.Popen:
+def start_actor(endpoint: str, actor_id: str, *extra, delay_max: str | None = "0.5") -> subprocess.Popen:
+    waits = ("--delay-max", delay_max) if delay_max is not None else ()
     return subprocess.Popen(
         [sys.executable, "-m", "crossway", "actor", "--connect", endpoint, "--id", actor_id,
-         "--scenario", "easy", "--delay-max", "0.5", "--update-interval", "10", "--seed", "1", *extra],
+         "--scenario", "easy", *waits, "--update-interval", "10", "--seed", "1", *extra],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
     )
 
@@ -100,7 +101,7 @@ def test_an_actor_killed_mid_episode_leaves_the_learner_running(learner):
 def test_a_yield_drill_actor_drives_from_the_stop_arm_among_traffic(learner):
     """--yield-drill: learners only on hard's stop-sign arm; IDM traffic on the main road."""
     service, endpoint, _ = learner
-    actor = start_actor(endpoint, "drill", "--scenario", "hard", "--yield-drill")
+    actor = start_actor(endpoint, "drill", "--scenario", "hard", "--yield-drill", delay_max=None)
     try:
         wait_for(lambda: service.pushes_by_actor.get("drill", 0) >= 6, 180, "the drill's pushes")
     finally:
@@ -110,6 +111,15 @@ def test_a_yield_drill_actor_drives_from_the_stop_arm_among_traffic(learner):
                 for metric in service.metrics.episodes.collect() for s in metric.samples
                 if s.name.endswith("_total") and s.value > 0}
     assert finished and set(finished) == {("hard", "stop")}  # every learner started at the stop sign
+
+
+@pytest.mark.parametrize("bad, message", [(("--scenario", "easy"), "the yield drill runs on the hard junction"),
+                                          (("--scenario", "hard", "--delay-max", "5"), "leave out --delay-max"),
+                                          (("--scenario", "hard", "--lanes", "south_0"), "leave out --lanes")])
+def test_an_actor_refuses_a_yield_drill_it_cannot_run(bad, message):
+    result = subprocess.run([sys.executable, "-m", "crossway", "actor", "--yield-drill", *bad,
+                             "--connect", f"tcp/127.0.0.1:{free_port()}"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and message in result.stderr
 
 
 def learner_process(run_dir: Path, endpoint: str) -> subprocess.Popen:
@@ -293,7 +303,7 @@ def test_a_resumed_run_goes_on_with_its_episode_count_and_rolling_reach_rate(tmp
     window = [index % 4 != 0 for index in range(50, 250)]  # the newest 200 before the checkpoint
     assert after.reach_rate == pytest.approx(sum(window) / 200)
     second.metrics.record_episode("easy", "none", "crash", 5.0)  # index 50 (a goal) drops out
-    assert second.status().reach_rate == pytest.approx((sum(window[1:]) + 0) / 200)
+    assert second.status().reach_rate == pytest.approx(sum(window[1:]) / 200)
 
 
 def test_train_refuses_initial_weights_that_are_not_a_checkpoint(tmp_path):

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 CURRICULA = ("none", "single", "yield")
-YIELD_DRILL_TRAFFIC_CARS = 8  # the TTC test's "medium" traffic level
+YIELD_DRILL_TRAFFIC_LEVEL = "medium"  # the TTC test's level: at most 8 traffic cars
 YIELD_DRILL_TRAFFIC_DELAY_MAX_S = 40.0  # longest wait before a traffic car starts again [s]
 CURRICULUM_NOTES = {"none": "", "single": " (single-agent curriculum)",
                     "yield": " (yield curriculum: odd-numbered actors drive the yield drill)"}
@@ -181,13 +181,9 @@ def yield_drill_sim_config():
     meets has priority over it, so each episode asks it to find a gap: the skill our policies
     lack (docs/training.md#giving-way-why-our-agents-have-not-learned-it-yet).
     """
-    from evaluation.ttc_test import EGO_LANES, EGO_WAIT_S, SIGNS, TRAFFIC_LANES
-    from simcore.simulator import SimConfig, TrafficConfig
+    from evaluation.ttc_test import EGO_LANES, ttc_setting
 
-    traffic = TrafficConfig(lanes=TRAFFIC_LANES, max_cars=YIELD_DRILL_TRAFFIC_CARS, delay_min_s=0.0,
-                            delay_max_s=YIELD_DRILL_TRAFFIC_DELAY_MAX_S)
-    return SimConfig(lanes=EGO_LANES, signs=SIGNS, traffic=traffic, delay_min_s=EGO_WAIT_S[0],
-                     delay_max_s=EGO_WAIT_S[1], start_all_at_reset=False)
+    return ttc_setting(EGO_LANES, YIELD_DRILL_TRAFFIC_LEVEL, YIELD_DRILL_TRAFFIC_DELAY_MAX_S)
 
 
 def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, seed, actor_id: str,
@@ -234,6 +230,9 @@ def run_actor_command(args) -> int:
     from protocol.transport import parse_endpoints
 
     lanes = tuple(x for x in args.lanes.split(",") if x) or None
+    if args.yield_drill and args.delay_max is not None:
+        raise ValueError("the yield drill sets its own waits (0-2 s for learners, 0-40 s for traffic): "
+                         "leave out --delay-max")
     return run_actor(actor_config(args, parse_endpoints(args.connect), lanes, args.seed, args.id, args.delay_max,
                                   yield_drill=args.yield_drill))
 
