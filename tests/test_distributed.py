@@ -167,7 +167,7 @@ def test_train_command_smoke(tmp_path):
     result = subprocess.run(
         [sys.executable, "-m", "crossway", "train", "--scenario", "easy", "--actors", "1", "--minutes", "0.4",
          "--run-dir", str(run_dir), "--metrics-port", "0", "--delay-max", "0.5", "--noise-correlation", "0.9",
-         "--acceleration-cost", "0.02"],
+         "--acceleration-cost", "0.02", "--gamma", "0.998"],
         capture_output=True, text=True, timeout=180,
     )
     assert result.returncode == 0, result.stderr
@@ -182,6 +182,8 @@ def test_train_command_smoke(tmp_path):
                                           (("--noise-correlation", "1.0"), "--noise-correlation must be in [0, 1)"),
                                           (("--acceleration-cost", "-1"), "--acceleration-cost must be >= 0"),
                                           (("--value-coef", "0"), "--value-coef must be > 0"),
+                                          (("--gamma", "1.5"), "--gamma must be in (0, 1]"),
+                                          (("--gamma", "0"), "--gamma must be in (0, 1]"),
                                           (("--curriculum", "yield", "--actors", "1", "--scenario", "hard"),
                                            "--curriculum yield needs --actors 2"),
                                           (("--curriculum", "yield", "--actors", "2", "--scenario", "easy"),
@@ -315,3 +317,17 @@ def test_train_refuses_initial_weights_that_are_not_a_checkpoint(tmp_path):
     assert result.returncode != 0
     assert "bogus.pt is not a crossway checkpoint" in result.stderr
     assert not (tmp_path / "run" / "checkpoints").exists()  # nothing started
+
+
+def test_actor_options_reach_the_agents_config():
+    """--gamma and the other agent-side options end up in the D-A3C config the actor runs with."""
+    from crossway.cli import build_parser
+    from crossway.commands.distributed import actor_config
+
+    args = build_parser().parse_args(["actor", "--scenario", "hard", "--gamma", "0.998", "--noise-correlation", "0.9",
+                                      "--acceleration-cost", "0.01", "--value-coef", "2"])
+    config = actor_config(args, ("tcp/127.0.0.1:7447",), None, 0, "a", None)
+    assert (config.da3c.gamma, config.da3c.noise_correlation) == (0.998, 0.9)
+    assert (config.da3c.acceleration_cost, config.da3c.value_coef) == (0.01, 2.0)
+    default = actor_config(build_parser().parse_args(["actor"]), ("tcp/127.0.0.1:7447",), None, 0, "a", None)
+    assert default.da3c.gamma == 0.99  # the paper gives no discount; ours stays the default

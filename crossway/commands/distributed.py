@@ -73,6 +73,11 @@ def _add_actor_options(parser: argparse.ArgumentParser) -> None:
                         help="AR(1) coefficient of each car's acceleration noise per 0.1 s step, in [0, 1): "
                              "0 draws fresh noise every step (the paper); 0.95 holds a deviation for about "
                              "2 s, so cars explore braking long enough to give way (docs/training.md)")
+    parser.add_argument("--gamma", type=float, default=0.99,
+                        help="discount factor per 0.1 s step, in (0, 1] (not given in the paper). It sets how "
+                             "much crash risk a car accepts to save waiting time: with 0.99, going first beats "
+                             "waiting 2 s for a car with priority unless it crashes more than ~8%% of the time; "
+                             "with 0.998, ~2%% (docs/training.md#the-discount-and-giving-way)")
     parser.add_argument("--value-coef", type=float, default=0.5, metavar="COEF",
                         help="weight of the value losses against the policy losses in each local update")
     parser.add_argument("--acceleration-cost", type=float, default=0.0, metavar="COEF",
@@ -200,6 +205,8 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         raise ValueError(f"--noise-correlation must be in [0, 1), got {args.noise_correlation}")
     if not args.value_coef > 0.0:
         raise ValueError(f"--value-coef must be > 0, got {args.value_coef}")
+    if not 0.0 < args.gamma <= 1.0:
+        raise ValueError(f"--gamma must be in (0, 1], got {args.gamma}")
     if not args.acceleration_cost >= 0.0:
         raise ValueError(f"--acceleration-cost must be >= 0, got {args.acceleration_cost}")
     if yield_drill:
@@ -214,7 +221,8 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         scenario=args.scenario, run_name=args.run_name, transport=_transport(args, (), connect),
         actor_id=actor_id, seed=seed, sim=sim,
         da3c=DA3CConfig(update_interval=args.update_interval, noise_correlation=args.noise_correlation,
-                        acceleration_cost=args.acceleration_cost, value_coef=args.value_coef),
+                        acceleration_cost=args.acceleration_cost, value_coef=args.value_coef,
+                        gamma=args.gamma),
     )
 
 
