@@ -44,6 +44,9 @@ class ActorServiceConfig:
     policy: PolicyConfig = PolicyConfig()
     torch_threads: int = 1
     max_episodes: int = 0  # stop after this many finished episodes (0: run until signalled)
+    # the scenario label of this actor's episodes in the learner's metrics (default: the scenario's
+    # name); the yield drill's say "hard-yield-drill", so its crash rate can be read on its own
+    episode_label: str = ""
 
 
 class ActorService:
@@ -91,7 +94,7 @@ class ActorService:
 
     def push(self, session: zenoh.Session, episode: FinishedEpisode) -> None:
         s = episode.summary
-        stats = EpisodeStats(scenario=self.sim.spec.name, lane=s.lane, sign=s.sign, end_reason=s.end_reason,
+        stats = EpisodeStats(scenario=self.config.episode_label or self.sim.spec.name, lane=s.lane, sign=s.sign, end_reason=s.end_reason,
                              steps=s.steps, mean_speed_mps=s.mean_speed_mps, return_acc=s.return_acc,
                              return_sa=s.return_sa, turn=s.turn)
         losses = episode.mean_losses

@@ -20,6 +20,7 @@ from pathlib import Path
 CURRICULA = ("none", "single", "yield")
 YIELD_DRILL_TRAFFIC_LEVEL = "medium"  # the TTC test's level: at most 8 traffic cars
 YIELD_DRILL_TRAFFIC_DELAY_MAX_S = 40.0  # longest wait before a traffic car starts again [s]
+YIELD_DRILL_LABEL = "hard-yield-drill"  # scenario label of the drill's episodes in the learner's metrics
 CURRICULUM_NOTES = {"none": "", "single": " (single-agent curriculum)",
                     "yield": " (yield curriculum: odd-numbered actors drive the yield drill)"}
 
@@ -215,11 +216,13 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         if lanes is not None:
             raise ValueError("the yield drill chooses its own lanes: leave out --lanes")
         sim = yield_drill_sim_config()
+        episode_label = YIELD_DRILL_LABEL
     else:
+        episode_label = ""
         sim = SimConfig(lanes=lanes, delay_max_s=delay_max, delay_min_s=0.0 if delay_max is not None else None)
     return ActorServiceConfig(
         scenario=args.scenario, run_name=args.run_name, transport=_transport(args, (), connect),
-        actor_id=actor_id, seed=seed, sim=sim,
+        actor_id=actor_id, seed=seed, sim=sim, episode_label=episode_label,
         da3c=DA3CConfig(update_interval=args.update_interval, noise_correlation=args.noise_correlation,
                         acceleration_cost=args.acceleration_cost, value_coef=args.value_coef,
                         gamma=args.gamma),
