@@ -86,6 +86,12 @@ def run_ttc_test(test: TTCTest, progress=None) -> dict:
                                                 for k in ("goal", "crash", "off_path", "time_over")}}
 
 
+def cell_seed(seed: int, level_index: int, delay_index: int) -> int:
+    """The seed of one (traffic level, delay) cell, the same in the sweep and in the comparison:
+    a TTC cell at the chosen threshold is then the same episodes in both, and is run only once."""
+    return seed + 100 * level_index + delay_index
+
+
 def _run_all(tests: list[TTCTest], workers: int, label: str) -> list[dict]:
     return run_parallel(run_ttc_test, [(t,) for t in tests], sum(t.episodes for t in tests), workers, label)
 
@@ -94,8 +100,8 @@ def sweep_thresholds(thresholds: list[float], episodes: int, delays: list[float]
                      seed: int) -> tuple[float | None, list[dict]]:
     """The paper's choice: the threshold with the best reach rate among those with zero crashes
     (over every traffic level and delay)."""
-    tests = [TTCTest("ttc", level, d, episodes, seed + i, thr, None)
-             for thr in thresholds for i, (level, d) in enumerate((lv, d) for lv in TRAFFIC_LEVELS for d in delays)]
+    tests = [TTCTest("ttc", level, d, episodes, cell_seed(seed, j, i), thr, None)
+             for thr in thresholds for j, level in enumerate(TRAFFIC_LEVELS) for i, d in enumerate(delays)]
     rows = _run_all(tests, workers, "ttc sweep")
     best, best_reach = None, -1.0
     for thr in thresholds:
@@ -108,17 +114,25 @@ def sweep_thresholds(thresholds: list[float], episodes: int, delays: list[float]
 
 
 def run_comparison(checkpoint: str | None, threshold_s: float, episodes: int, delays: list[float],
-                   workers: int, seed: int, out_dir: Path, command: str) -> dict:
+                   workers: int, seed: int, out_dir: Path, command: str, sweep_rows: list[dict] = ()) -> dict:
+    """Both drivers on every (traffic level, delay) cell. ``sweep_rows``: rows of a sweep run with
+    the same seed and episodes; its TTC cells at ``threshold_s`` are the same episodes, so they are
+    taken as they are instead of being driven again."""
     drivers = ["ttc"] + (["policy"] if checkpoint is not None else [])
     if checkpoint is not None:
         from evaluation.policy import load_policy
 
         load_policy(checkpoint)
-    tests = [TTCTest(driver, level, d, episodes, seed + 100 * j + i, threshold_s, checkpoint)
+    tests = [TTCTest(driver, level, d, episodes, cell_seed(seed, j, i), threshold_s, checkpoint)
              for driver in drivers
              for j, level in enumerate(TRAFFIC_LEVELS) for i, d in enumerate(delays)]
+    swept = {(r["level"], r["delay_max_s"]): r for r in sweep_rows
+             if r["driver"] == "ttc" and r["threshold_s"] == threshold_s and r["episodes"] == episodes}
     started = time.monotonic()
-    rows = _run_all(tests, workers, "ttc comparison")
+    to_run = [t for t in tests if not (t.driver == "ttc" and (t.level, t.delay_max_s) in swept)]
+    ran = iter(_run_all(to_run, workers, "ttc comparison") if to_run else [])
+    rows = [swept[(t.level, t.delay_max_s)] if t not in to_run else next(ran) for t in tests]
+    reused = len(tests) - len(to_run)
     out_dir.mkdir(parents=True, exist_ok=True)
     csv_path = out_dir / "ttc-comparison.csv"
     with open(csv_path, "w", newline="") as handle:
@@ -127,7 +141,8 @@ def run_comparison(checkpoint: str | None, threshold_s: float, episodes: int, de
         writer.writerows(rows)
     pictures = draw_figures(rows, threshold_s, out_dir)
     meta = {"checkpoint": checkpoint, "threshold_s": threshold_s, "episodes_per_cell": episodes, "delays_max_s": delays,
-            "levels": TRAFFIC_LEVELS, "seed": seed, "wall_s": round(time.monotonic() - started, 1), "command": command}
+            "levels": TRAFFIC_LEVELS, "seed": seed, "wall_s": round(time.monotonic() - started, 1), "command": command,
+            "ttc_cells_from_sweep": reused}
     json_path = out_dir / "ttc-comparison.json"
     json_path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
     return {"rows": rows, "paths": [json_path, csv_path, *pictures], "meta": meta}

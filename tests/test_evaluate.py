@@ -133,3 +133,20 @@ def test_export_keeps_the_policy_and_evaluates_the_same(tmp_path):
     for (name, a), (_, b) in zip(original.state_dict().items(), exported.state_dict().items()):
         assert torch.equal(a, b), name
     assert torch.load(small, weights_only=False)["note"] == "unit test"
+
+
+def test_ttc_comparison_reuses_the_sweeps_cells_at_the_chosen_threshold(tmp_path):
+    """The sweep and the comparison seed each cell alike, so a TTC cell at the chosen threshold is the
+    same episodes in both: the comparison takes it from the sweep instead of driving it again."""
+    from evaluation.ttc_test import TRAFFIC_LEVELS, run_comparison, sweep_thresholds
+
+    delays, threshold_s = [20.0, 40.0], 1.0  # a reckless threshold: outcomes depend on the traffic drawn
+    _, sweep_rows = sweep_thresholds([threshold_s, 1000.0], 4, delays, 2, seed=5)
+    fresh = run_comparison(None, threshold_s, 4, delays, 2, 5, tmp_path / "fresh", "test")
+    reused = run_comparison(None, threshold_s, 4, delays, 2, 5, tmp_path / "reused", "test", sweep_rows=sweep_rows)
+    assert fresh["meta"]["ttc_cells_from_sweep"] == 0
+    assert reused["meta"]["ttc_cells_from_sweep"] == len(TRAFFIC_LEVELS) * len(delays)
+    assert reused["rows"] == fresh["rows"]  # the same episodes, whether driven again or not
+    assert [r for r in sweep_rows if r["threshold_s"] == threshold_s] == fresh["rows"]
+    other_seed = run_comparison(None, threshold_s, 4, delays, 2, 6, tmp_path / "other", "test")
+    assert other_seed["rows"] != fresh["rows"]  # so the equalities above say something

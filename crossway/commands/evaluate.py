@@ -160,6 +160,7 @@ def run_ttc_command(args) -> int:
     threshold = args.threshold
     if threshold <= 0:
         raise ValueError(f"--threshold must be > 0, got {threshold}")
+    rows = []
     if args.sweep:
         best, rows = sweep_thresholds(_floats(args.sweep, "--sweep"), args.episodes, delays, args.workers, args.seed)
         for row in rows:
@@ -170,7 +171,10 @@ def run_ttc_command(args) -> int:
         threshold = best
         print(f"sweep: chose {threshold:g} s")
     report = run_comparison(checkpoint, threshold, args.episodes, delays, args.workers, args.seed, args.out,
-                            _command_line())
+                            _command_line(), sweep_rows=rows)
+    if report["meta"]["ttc_cells_from_sweep"]:
+        print(f"comparison: the TTC agent's {report['meta']['ttc_cells_from_sweep']} cells at {threshold:g} s "
+              "are the sweep's (same seeds, same episodes)")
     for row in report["rows"]:
         print(f"{row['driver']:6s} {row['level']:6s} delay {row['delay_max_s']:5g} s: reach {row['goal_rate']:.3f} "
               f"crash {row['crash_rate']:.3f} time-over {row['time_over_rate']:.3f}")
