@@ -44,6 +44,10 @@ class DA3CConfig:
     # speed every mean above "hold" is free, so without it mu_acc drifts to tanh's +1, where the
     # exploration noise almost never brakes and tanh's slope is ~0 (docs/training.md#giving-way)
     acceleration_cost: float = 0.0
+    # lambda of generalized advantage estimation (Schulman et al. 2016) for the policy gradient; 1
+    # gives the paper's A_t = R_t - v(s_t) exactly, lower values weight the critic's later estimates
+    # more and the segment's far rewards less (less variance, more bias). The value target stays R_t.
+    gae_lambda: float = 1.0
 
 
 class ExplorationNoise:
@@ -105,6 +109,22 @@ def n_step_returns(rewards: torch.Tensor, bootstrap: torch.Tensor | float, gamma
     return torch.tensor(returns, dtype=rewards.dtype)
 
 
+def gae_advantages(rewards: torch.Tensor, values: torch.Tensor, bootstrap: float, gamma: float,
+                   lam: float) -> torch.Tensor:
+    """A_t = sum_k (gamma lam)^k delta_{t+k}, delta_t = r_t + gamma v(s_{t+1}) - v(s_t), over the
+    segment, v(s_T) = ``bootstrap`` (0 when the episode terminated). lam = 1 gives R_t - v(s_t)
+    (``n_step_returns``); lam = 0 the one-step TD error. ``values`` [T] are constants here."""
+    values = values.detach()
+    next_values = torch.cat([values[1:], values.new_tensor([float(bootstrap)])])
+    deltas = (rewards + gamma * next_values - values).tolist()
+    advantages = [0.0] * len(deltas)
+    running = 0.0
+    for t in range(len(deltas) - 1, -1, -1):
+        running = deltas[t] + gamma * lam * running
+        advantages[t] = running
+    return torch.tensor(advantages, dtype=rewards.dtype)
+
+
 def gaussian_log_prob(action: torch.Tensor, mu: torch.Tensor, sigma: float) -> torch.Tensor:
     """log N(action | mu, sigma); its gradient in mu is (action - mu) / sigma^2 (paper, eq. 4)."""
     return -((action - mu) ** 2) / (2.0 * sigma * sigma) - math.log(sigma) - LOG_SQRT_2PI
@@ -118,17 +138,20 @@ class StreamLoss:
 
 
 def stream_loss(mu: torch.Tensor, values: torch.Tensor, actions: torch.Tensor, rewards: torch.Tensor,
-                bootstrap: float, gamma: float, sigma: float) -> StreamLoss:
+                bootstrap: float, gamma: float, sigma: float, gae_lambda: float = 1.0) -> StreamLoss:
     """Policy and value loss of one stream over one segment (sums over its steps).
 
     Minimising ``policy`` follows eq. (1) with A_t = R_t - v(s_t): the advantage is a constant
-    weight, so the gradient is -A_t (a_t - mu_t) / sigma^2 * grad mu_t.
+    weight, so the gradient is -A_t (a_t - mu_t) / sigma^2 * grad mu_t. With ``gae_lambda`` < 1
+    the policy's A_t is ``gae_advantages``; the value loss always regresses v(s_t) on R_t.
     """
     returns = n_step_returns(rewards, bootstrap, gamma)
-    advantages = returns - values
-    policy = -(advantages.detach() * gaussian_log_prob(actions, mu, sigma)).sum()
-    value = 0.5 * (advantages ** 2).sum()
-    return StreamLoss(policy, value, advantages.detach())
+    errors = returns - values
+    advantages = (errors.detach() if gae_lambda == 1.0
+                  else gae_advantages(rewards, values, bootstrap, gamma, gae_lambda))
+    policy = -(advantages * gaussian_log_prob(actions, mu, sigma)).sum()
+    value = 0.5 * (errors ** 2).sum()
+    return StreamLoss(policy, value, advantages)
 
 
 # -- one agent's episode ------------------------------------------------------------------------
@@ -202,7 +225,7 @@ class EpisodeLearner:
         rewards = torch.from_numpy(self.rewards[:n])
         sigmas = (sigma, sigma) if isinstance(sigma, (int, float)) else sigma
         acc, sa = (stream_loss(mu[:n, h], values[:n, h], actions[:, h], rewards[:, h], boot[h], cfg.gamma,
-                               sigmas[h])
+                               sigmas[h], cfg.gae_lambda)
                    for h in range(2))
         loss = acc.policy + sa.policy + cfg.value_coef * (acc.value + sa.value)
         if cfg.acceleration_cost > 0.0:

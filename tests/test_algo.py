@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from algo.d_a3c import (ActorCore, DA3CConfig, EpisodeLearner, ExplorationNoise, gaussian_log_prob, n_step_returns,
-                        stream_loss)
+from algo.d_a3c import (ActorCore, DA3CConfig, EpisodeLearner, ExplorationNoise, gae_advantages, gaussian_log_prob,
+                        n_step_returns, stream_loss)
 from algo.policy import Policy, preprocess, sigma_at
 from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
 from learner.core import LearnerConfig, LearnerCore, StaleGradient
@@ -20,6 +20,33 @@ def test_n_step_returns_by_hand():
     assert n_step_returns(rewards, 4.0, 0.5).tolist() == pytest.approx([2.0, 2.0, 4.0])
     # terminal: no bootstrap
     assert n_step_returns(rewards, 0.0, 0.5).tolist() == pytest.approx([1.5, 1.0, 2.0])
+
+
+def test_gae_advantages_by_hand():
+    rewards, values, gamma = torch.tensor([1.0, 0.0, 2.0]), torch.tensor([0.5, 1.0, 3.0]), 0.5
+    # deltas: 1 + 0.5 * 1 - 0.5 = 1; 0 + 0.5 * 3 - 1 = 0.5; 2 + 0.5 * 4 - 3 = 1 (bootstrap 4)
+    assert gae_advantages(rewards, values, 4.0, gamma, 0.0).tolist() == pytest.approx([1.0, 0.5, 1.0])
+    # lambda 0.5: A_2 = 1; A_1 = 0.5 + 0.25 * 1 = 0.75; A_0 = 1 + 0.25 * 0.75 = 1.1875
+    assert gae_advantages(rewards, values, 4.0, gamma, 0.5).tolist() == pytest.approx([1.1875, 0.75, 1.0])
+    # lambda 1 is the n-step advantage R_t - v(s_t), bootstrapped or terminal
+    for bootstrap in (4.0, 0.0):
+        expected = n_step_returns(rewards, bootstrap, gamma) - values
+        assert gae_advantages(rewards, values, bootstrap, gamma, 1.0).tolist() == pytest.approx(expected.tolist())
+
+
+def test_gae_changes_the_policy_weights_but_not_the_value_target():
+    mu, actions = torch.tensor([0.0, 0.1], requires_grad=True), torch.tensor([0.2, -0.1])
+    rewards, bootstrap = torch.tensor([0.005, -1.0]), 0.0
+    values = torch.tensor([0.3, 0.1], requires_grad=True)
+    paper = stream_loss(mu, values, actions, rewards, bootstrap, 0.9, 0.5)
+    td = stream_loss(mu, values, actions, rewards, bootstrap, 0.9, 0.5, gae_lambda=0.0)
+    # one-step TD errors: 0.005 + 0.9 * 0.1 - 0.3 = -0.205; -1 + 0 - 0.1 = -1.1
+    assert td.advantages.tolist() == pytest.approx([-0.205, -1.1])
+    assert paper.advantages.tolist() == pytest.approx([-1.195, -1.1])
+    assert float(td.value) == pytest.approx(float(paper.value))  # v still regresses on R_t
+    (grad_td,) = torch.autograd.grad(td.policy, mu)
+    # d/dmu of -A log N(a | mu, sigma) = -A (a - mu) / sigma^2
+    assert grad_td.tolist() == pytest.approx([0.205 * 0.2 / 0.25, 1.1 * -0.2 / 0.25])
 
 
 def test_advantages_for_both_streams_by_hand():
@@ -223,9 +250,10 @@ def test_matrix_form_of_the_network_matches_the_modules():
             torch.testing.assert_close(values[b], torch.stack([v_acc, v_sa], 1), atol=1e-5, rtol=1e-4)
 
 
-@pytest.mark.parametrize("terminal, max_grad_norm, cost, sigma", [
-    (False, 1e9, 0.0, 0.4), (True, 1e9, 0.0, 0.4), (False, 0.5, 0.0, 0.4), (False, 1e9, 0.3, (0.15, 0.4))])
-def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max_grad_norm, cost, sigma):
+@pytest.mark.parametrize("terminal, max_grad_norm, cost, sigma, lam", [
+    (False, 1e9, 0.0, 0.4, 1.0), (True, 1e9, 0.0, 0.4, 1.0), (False, 0.5, 0.0, 0.4, 1.0),
+    (False, 1e9, 0.3, (0.15, 0.4), 1.0), (False, 1e9, 0.0, 0.4, 0.8)])
+def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max_grad_norm, cost, sigma, lam):
     """The update that reuses acting's first layer gives autograd's gradient on the whole segment,
     clipping, the acceleration cost and per-head sigmas included, and moves the local weights by
     -lr times it."""
@@ -233,7 +261,7 @@ def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max
     torch.manual_seed(1)
     policy = Policy()
     config = DA3CConfig(update_interval=6, max_grad_norm=max_grad_norm, local_learning_rate=0.01,
-                        acceleration_cost=cost)
+                        acceleration_cost=cost, gae_lambda=lam)
     n = 5
     sigmas = (sigma, sigma) if isinstance(sigma, float) else sigma
     params = {name: p.detach().clone() for name, p in policy.named_parameters()}
@@ -259,8 +287,8 @@ def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max
     mu_acc, v_acc, mu_sa, v_sa = torch.func.functional_call(policy, leaves, (views, scalars))
     boot = (0.0, 0.0) if terminal else (float(v_acc[n].detach()), float(v_sa[n].detach()))
     a, r = torch.from_numpy(actions), torch.from_numpy(rewards)
-    acc = stream_loss(mu_acc[:n], v_acc[:n], a[:, 0], r[:, 0], boot[0], config.gamma, sigmas[0])
-    sa = stream_loss(mu_sa[:n], v_sa[:n], a[:, 1], r[:, 1], boot[1], config.gamma, sigmas[1])
+    acc = stream_loss(mu_acc[:n], v_acc[:n], a[:, 0], r[:, 0], boot[0], config.gamma, sigmas[0], lam)
+    sa = stream_loss(mu_sa[:n], v_sa[:n], a[:, 1], r[:, 1], boot[1], config.gamma, sigmas[1], lam)
     (acc.policy + sa.policy + config.value_coef * (acc.value + sa.value) + cost * mu_acc[:n].square().sum()).backward()
     torch.nn.utils.clip_grad_norm_(list(leaves.values()), max_grad_norm)
     for name, leaf in leaves.items():

@@ -79,6 +79,9 @@ def _add_actor_options(parser: argparse.ArgumentParser) -> None:
                              "much crash risk a car accepts to save waiting time: with 0.99, going first beats "
                              "waiting 2 s for a car with priority unless it crashes more than ~8%% of the time; "
                              "with 0.998, ~2%% (docs/training.md#the-discount-and-giving-way)")
+    parser.add_argument("--gae-lambda", type=float, default=1.0, metavar="LAMBDA",
+                        help="lambda of generalized advantage estimation for the policy gradient, in [0, 1]: 1 is "
+                             "the paper's A = R - v; lower leans on the critic (less variance, more bias)")
     parser.add_argument("--value-coef", type=float, default=0.5, metavar="COEF",
                         help="weight of the value losses against the policy losses in each local update")
     parser.add_argument("--acceleration-cost", type=float, default=0.0, metavar="COEF",
@@ -208,6 +211,8 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         raise ValueError(f"--value-coef must be > 0, got {args.value_coef}")
     if not 0.0 < args.gamma <= 1.0:
         raise ValueError(f"--gamma must be in (0, 1], got {args.gamma}")
+    if not 0.0 <= args.gae_lambda <= 1.0:
+        raise ValueError(f"--gae-lambda must be in [0, 1], got {args.gae_lambda}")
     if not args.acceleration_cost >= 0.0:
         raise ValueError(f"--acceleration-cost must be >= 0, got {args.acceleration_cost}")
     if yield_drill:
@@ -225,7 +230,7 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         actor_id=actor_id, seed=seed, sim=sim, episode_label=episode_label,
         da3c=DA3CConfig(update_interval=args.update_interval, noise_correlation=args.noise_correlation,
                         acceleration_cost=args.acceleration_cost, value_coef=args.value_coef,
-                        gamma=args.gamma),
+                        gamma=args.gamma, gae_lambda=args.gae_lambda),
     )
 
 
