@@ -24,6 +24,10 @@ class LearnerMetrics:
                                 f"Goal fraction of the last {ROLLING_EPISODES} episodes (0-1)", registry=r)
         self.mean_speed = Gauge("crossway_mean_speed_meters_per_second",
                                 f"Mean speed over the last {ROLLING_EPISODES} episodes", registry=r)
+        self.reach_rate_by_scenario = Gauge(
+            "crossway_reach_rate_by_scenario_ratio",
+            f"Goal fraction of the last {ROLLING_EPISODES} episodes of each scenario label (0-1)", ["scenario"],
+            registry=r)
         self.updates = Counter("crossway_updates_total", "Gradient pushes applied to the global network",
                                registry=r)
         self.rejected = Counter("crossway_rejected_messages_total", "Messages refused, by reason",
@@ -48,6 +52,7 @@ class LearnerMetrics:
         self.checkpoints = Counter("crossway_checkpoints_total", "Checkpoints written", registry=r)
         self._goals: deque[bool] = deque(maxlen=ROLLING_EPISODES)
         self._speeds: deque[float] = deque(maxlen=ROLLING_EPISODES)
+        self._goals_by_scenario: dict[str, deque[bool]] = {}  # labels come from actors' configs: few
         for reason in ("oversize", "malformed", "version", "type", "schema", "dtype", "shape",
                        "non_finite", "stale"):
             self.rejected.labels(reason)  # export zeros so dashboards see every reason
@@ -62,6 +67,9 @@ class LearnerMetrics:
             return  # cut short: neither a reach nor a failure
         self._goals.append(end_reason == "goal")
         self._speeds.append(mean_speed_mps)
+        goals = self._goals_by_scenario.setdefault(scenario, deque(maxlen=ROLLING_EPISODES))
+        goals.append(end_reason == "goal")
+        self.reach_rate_by_scenario.labels(scenario).set(sum(goals) / len(goals))
         self.reach_rate.set(sum(self._goals) / len(self._goals))
         self.mean_speed.set(sum(self._speeds) / len(self._speeds))
 
@@ -73,14 +81,25 @@ class LearnerMetrics:
     def rolling_mean_speed(self) -> float:
         return sum(self._speeds) / len(self._speeds) if self._speeds else 0.0
 
+    @property
+    def rolling_reach_rate_by_scenario(self) -> dict[str, float]:
+        """Goal fraction of each scenario label's last episodes (the yield drill apart from hard)."""
+        return {label: sum(goals) / len(goals) for label, goals in self._goals_by_scenario.items() if goals}
+
     def rolling_state(self) -> dict:
         """The rolling windows, for a checkpoint (a resumed run's reach rate goes on from them)."""
-        return {"goals": list(self._goals), "speeds_mps": list(self._speeds)}
+        return {"goals": list(self._goals), "speeds_mps": list(self._speeds),
+                "goals_by_scenario": {label: list(goals) for label, goals in self._goals_by_scenario.items()}}
 
     def restore_rolling(self, state: dict) -> None:
         """Refill the rolling windows from ``rolling_state``'s output (a missing key: left empty)."""
         self._goals.extend(bool(goal) for goal in state.get("goals", ()))
         self._speeds.extend(float(speed) for speed in state.get("speeds_mps", ()))
+        for label, goals in state.get("goals_by_scenario", {}).items():
+            window = self._goals_by_scenario.setdefault(str(label), deque(maxlen=ROLLING_EPISODES))
+            window.extend(bool(goal) for goal in goals)
+            if window:
+                self.reach_rate_by_scenario.labels(str(label)).set(sum(window) / len(window))
         if self._goals:
             self.reach_rate.set(self.rolling_reach_rate)
             self.mean_speed.set(self.rolling_mean_speed)

@@ -220,6 +220,7 @@ class LearnerService:
             episodes=self._episodes, reach_rate=self.metrics.rolling_reach_rate,
             mean_speed_mps=self.metrics.rolling_mean_speed, agent_steps_per_s=self.agent_steps_per_s(),
             sigma=self.core.sigma, live_actors=len(self._live_actors), rejected=self._rejected,
+            reach_by_scenario=self.metrics.rolling_reach_rate_by_scenario,
         )
 
     def checkpoint(self) -> Path:

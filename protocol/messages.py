@@ -168,6 +168,8 @@ class LearnerStatus(Message):
     sigma: float
     live_actors: int
     rejected: int  # messages refused since start, any reason
+    # goal fraction of the last episodes of each scenario label, e.g. {"hard": 0.8, "hard-yield-drill": 0.7}
+    reach_by_scenario: dict[str, float] = field(default_factory=dict)
 
 
 MESSAGE_TYPES: dict[str, type[Message]] = {
@@ -235,6 +237,12 @@ def _build(cls: type, raw: dict[str, Any], where: str) -> Any:
                     raise DecodeError("schema", f"{where}.episodes[{i}]: expected a map")
                 episodes.append(_build(EpisodeStats, item, f"{where}.episodes[{i}]"))
             kwargs[f.name] = tuple(episodes)
+        elif f.name == "reach_by_scenario":
+            if not isinstance(value, dict):
+                raise DecodeError("schema", f"{where}.reach_by_scenario: expected a map of label to rate")
+            kwargs[f.name] = {_check_scalar("scenario", k, f"{where}.reach_by_scenario"):
+                              _check_scalar("reach_rate", v, f"{where}.reach_by_scenario[{k}]")
+                              for k, v in value.items()}
         elif f.name == "episodes":  # ActorHello and LearnerStatus count episodes
             kwargs[f.name] = _check_scalar("episodes_count", value, where)
         else:

@@ -1,6 +1,7 @@
 """Learner and actors over real Zenoh sessions on loopback (multicast scouting off, explicit
 endpoints): weights out, gradients in, actors dying, the learner restarting, the CLI."""
 
+import csv
 import signal
 import socket
 import subprocess
@@ -112,6 +113,7 @@ def test_a_yield_drill_actor_drives_from_the_stop_arm_among_traffic(learner):
                 if s.name.endswith("_total") and s.value > 0}
     # every learner started at the stop sign; the drill's episodes are counted apart from hard's
     assert finished and set(finished) == {("hard-yield-drill", "stop")}
+    assert set(service.status().reach_by_scenario) == {"hard-yield-drill"}
 
 
 @pytest.mark.parametrize("bad, message", [(("--scenario", "easy"), "the yield drill runs on the hard junction"),
@@ -176,6 +178,9 @@ def test_train_command_smoke(tmp_path):
     rows = (run_dir / "progress.csv").read_text().splitlines()
     assert rows[0].startswith("wall_s,version,agent_steps")
     assert len(rows) >= 3
+    by_scenario = list(csv.DictReader(open(run_dir / "progress-by-scenario.csv")))
+    assert by_scenario and {row["scenario"] for row in by_scenario} == {"easy"}
+    assert all(0.0 <= float(row["reach_rate"]) <= 1.0 for row in by_scenario)
     assert list((run_dir / "checkpoints").glob("ckpt-*.pt"))
 
 
@@ -308,6 +313,25 @@ def test_a_resumed_run_goes_on_with_its_episode_count_and_rolling_reach_rate(tmp
     assert after.reach_rate == pytest.approx(sum(window) / 200)
     second.metrics.record_episode("easy", "none", "crash", 5.0)  # index 50 (a goal) drops out
     assert second.status().reach_rate == pytest.approx(sum(window[1:]) / 200)
+
+
+def test_the_learner_keeps_a_reach_rate_per_scenario_label_across_a_resume(tmp_path):
+    """The yield drill's episodes (scenario label hard-yield-drill) have their own rolling reach rate,
+    in the status, in Prometheus, and in a checkpoint."""
+    config = LearnerServiceConfig(run_dir=tmp_path / "run", metrics_port=0,
+                                  transport=TransportConfig(listen=(f"tcp/127.0.0.1:{free_port()}",)))
+    first = LearnerService(config, log=lambda line: None)
+    for index in range(40):
+        first.metrics.record_episode("hard", "none", "goal" if index % 4 else "crash", 8.0)  # 30 of 40
+        first.metrics.record_episode("hard-yield-drill", "stop", "goal" if index % 2 else "crash", 6.0)  # 20 of 40
+    assert first.status().reach_by_scenario == {"hard": 0.75, "hard-yield-drill": 0.5}
+    assert first.status().reach_rate == pytest.approx(50 / 80)
+    gauge = {s.labels["scenario"]: s.value for metric in first.metrics.reach_rate_by_scenario.collect()
+             for s in metric.samples}
+    assert gauge == {"hard": 0.75, "hard-yield-drill": 0.5}
+    first.checkpoint()
+    second = LearnerService(config, log=lambda line: None)
+    assert second.status().reach_by_scenario == {"hard": 0.75, "hard-yield-drill": 0.5}
 
 
 def test_train_refuses_initial_weights_that_are_not_a_checkpoint(tmp_path):

@@ -15,6 +15,7 @@ from protocol.messages import (
     DecodeError,
     EpisodeStats,
     GradientPush,
+    LearnerStatus,
     Weights,
     check_shapes,
     decode,
@@ -145,6 +146,18 @@ def test_gradient_push_round_trip_no_episodes():
     out = decode(encode(msg))
     assert out.episodes == () and out.tensors == {}
     assert (out.loss_policy_acc, out.loss_policy_sa, out.loss_value_acc, out.loss_value_sa) == (0.0,) * 4
+
+
+def test_learner_status_round_trip_with_reach_by_scenario():
+    msg = LearnerStatus(run_id="r", version=3, agent_steps=100, episodes=7, reach_rate=0.5, mean_speed_mps=7.5,
+                        agent_steps_per_s=12.0, sigma=0.4, live_actors=2, rejected=0,
+                        reach_by_scenario={"hard": 0.75, "hard-yield-drill": 0.25})
+    assert decode(encode(msg), expect=LearnerStatus) == msg
+    older = {k: v for k, v in msg.__dict__.items() if k != "reach_by_scenario"}  # a learner before the field
+    assert decode(envelope(older, "status"), expect=LearnerStatus).reach_by_scenario == {}
+    for bad in ([0.5], {"hard": "0.5"}):
+        assert rejected(envelope({**older, "reach_by_scenario": bad}, "status")) == "schema"
+    assert rejected(envelope({**older, "reach_by_scenario": {"hard": math.nan}}, "status")) == "non_finite"
 
 
 def test_actor_hello_round_trip():

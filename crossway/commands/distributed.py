@@ -347,12 +347,17 @@ def run_train_command(args) -> int:
     latest: LearnerStatus | None = None
     interactive = sys.stderr.isatty()
     last_line = 0.0
-    with open(progress_path, "a", newline="") as handle, \
+    by_scenario_path = args.run_dir / "progress-by-scenario.csv"
+    new_by_scenario = not by_scenario_path.exists()
+    with open(progress_path, "a", newline="") as handle, open(by_scenario_path, "a", newline="") as by_handle, \
             open_session(TransportConfig(connect=(endpoint,))) as session:
         writer = csv.writer(handle)
+        by_writer = csv.writer(by_handle)
         if new_file:
             writer.writerow(["wall_s", "version", "agent_steps", "episodes", "reach_rate", "mean_speed_mps",
                              "agent_steps_per_s", "sigma", "live_actors", "rejected"])
+        if new_by_scenario:  # one row per scenario label and status: the yield drill apart from hard
+            by_writer.writerow(["wall_s", "version", "agent_steps", "scenario", "reach_rate"])
         subscriber = session.declare_subscriber(keys.status(args.run_name), zenoh.handlers.RingChannel(16))
         while not interrupted and time.monotonic() < deadline and learner.is_alive():
             sample = subscriber.try_recv()  # the newest status; the ring keeps the last few
@@ -369,10 +374,17 @@ def run_train_command(args) -> int:
                              round(status.reach_rate, 4), round(status.mean_speed_mps, 3),
                              round(status.agent_steps_per_s, 1), round(status.sigma, 4), status.live_actors,
                              status.rejected])
+            for label, rate in sorted(status.reach_by_scenario.items()):
+                by_writer.writerow([round(elapsed, 1), status.version, status.agent_steps, label, round(rate, 4)])
             handle.flush()
+            by_handle.flush()
+            by_label = ""
+            if len(status.reach_by_scenario) > 1:
+                by_label = " (" + ", ".join(f"{label} {rate:.1%}"
+                                            for label, rate in sorted(status.reach_by_scenario.items())) + ")"
             line = (f"train {int(elapsed // 60):02d}:{int(elapsed % 60):02d}  v{status.version}  "
                     f"{status.agent_steps:,} agent-steps ({status.agent_steps_per_s:,.0f}/s)  "
-                    f"{status.episodes:,} episodes  reach {status.reach_rate:6.1%}  "
+                    f"{status.episodes:,} episodes  reach {status.reach_rate:6.1%}{by_label}  "
                     f"speed {status.mean_speed_mps:4.1f} m/s  sigma {status.sigma:.3f}  "
                     f"actors {status.live_actors}/{args.actors}")
             if interactive:
