@@ -19,7 +19,8 @@ from protocol.transport import TransportConfig
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 SERVICES = ("router", "learner", "actor", "prometheus", "grafana")
-DASHBOARD_METRICS = ("crossway_reach_rate_ratio", "crossway_episodes_total", "crossway_agent_steps_per_second",
+DASHBOARD_METRICS = ("crossway_reach_rate_ratio", "crossway_reach_rate_by_scenario_ratio", "crossway_episodes_total",
+                     "crossway_agent_steps_per_second",
                      "crossway_weights_version", "crossway_gradient_staleness_versions_bucket",
                      "crossway_live_actors", "crossway_rejected_messages_total")
 
