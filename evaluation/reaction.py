@@ -22,6 +22,11 @@ The probe also asks whether the acceleration head's critic sees danger coming: o
 of every finished episode, the area under the ROC curve of -v_acc as a score for "this car
 crashes within the next ``RISK_HORIZON_STEPS`` steps" (0.5: the value says nothing about crashes;
 1: every step before a crash has a lower value than every other step).
+
+Last, the anatomy of the crashes: how many crashing cars ran into a car with priority over them
+(the car that should have given way; paper, "Reward Shaping", r_terminal = -1) and how fast
+they were going at impact, as a fraction of their target speed. A car that tried to give way
+and misjudged hits slowly; one that never tried hits at full speed.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ NEWEST_OBSTACLE_PLANE = 11
 HIGHER_PRIORITY_CODE = 128  # simcore.views.HIGHER_PRIORITY
 CHUNK_EPISODES = 100
 RISK_HORIZON_STEPS = 20  # "about to crash": within this many 0.1 s steps of the crash
+FULL_SPEED_RATIO = 0.9  # a crash at this fraction of the target speed or more: no attempt to give way
 
 
 @dataclass(frozen=True)
@@ -113,6 +119,7 @@ def run_probe(spec: ProbeSpec, progress=None) -> dict:
     acceleration, value = [], []  # rows: (with, without)
     episode_values: dict[int, list[float]] = {}  # slot -> v_acc at each step of its episode
     risk_scores, risk_labels = [], []
+    crashes = []  # (ran into a car with priority, speed at impact / target speed) per crashed car
     done = 0
     while done < spec.episodes:
         actions, values_now = driver.act_with_values(result)  # the "with" pass: what the cars do
@@ -134,6 +141,7 @@ def run_probe(spec: ProbeSpec, progress=None) -> dict:
             labels = np.zeros(len(history), dtype=bool)
             if episode.end_reason == "crash":
                 labels[-RISK_HORIZON_STEPS:] = True
+                crashes.append((episode.crashed_into_priority, episode.final_speed_mps / episode.target_speed_mps))
             risk_scores.extend(-v for v in history)
             risk_labels.extend(labels.tolist())
             finished += 1
@@ -141,7 +149,17 @@ def run_probe(spec: ProbeSpec, progress=None) -> dict:
         if progress is not None and finished:
             progress.put(finished)
     return {"acceleration": acceleration, "value": value, "episodes": done,
-            "risk_scores": risk_scores, "risk_labels": risk_labels}
+            "risk_scores": risk_scores, "risk_labels": risk_labels, "crashes": crashes}
+
+
+def crash_anatomy(crashes: list[tuple[bool, float]]) -> dict:
+    """Counts and impact speeds of crashed cars, given (ran into a car with priority, speed / target) each."""
+    at_fault = np.array([ratio for into_priority, ratio in crashes if into_priority], dtype=float)
+    anatomy = {"crashed_cars": len(crashes), "ran_into_priority": len(at_fault)}
+    if len(at_fault):
+        anatomy["at_fault_speed_ratio_median"] = round(float(np.median(at_fault)), 4)
+        anatomy["at_fault_full_speed_fraction"] = round(float((at_fault >= FULL_SPEED_RATIO).mean()), 4)
+    return anatomy
 
 
 def summarise(parts: list[dict]) -> dict:
@@ -152,12 +170,15 @@ def summarise(parts: list[dict]) -> dict:
     auc = roc_auc(np.array([score for p in parts for score in p["risk_scores"]]), labels)
     risk = {"steps": len(labels), "steps_before_a_crash": int(labels.sum()),
             "value_crash_auc": None if auc is None else round(auc, 4)}
+    crashes = crash_anatomy([tuple(c) for p in parts for c in p["crashes"]])
     if n == 0:
-        return {"encounter_steps": 0, "episodes": sum(p["episodes"] for p in parts), "risk": risk}
+        return {"encounter_steps": 0, "episodes": sum(p["episodes"] for p in parts), "risk": risk,
+                "crashes": crashes}
     drop = acceleration[:, 1] - acceleration[:, 0]  # how much the priority cars lower the command
     return {
         "episodes": sum(p["episodes"] for p in parts),
         "risk": risk,
+        "crashes": crashes,
         "encounter_steps": n,
         "acceleration_with_mps2": round(float(acceleration[:, 0].mean()), 4),
         "acceleration_without_mps2": round(float(acceleration[:, 1].mean()), 4),
@@ -182,10 +203,22 @@ def _risk_line(risk: dict) -> str:
             f"{risk['value_crash_auc']:.3f} (0.5: the value does not see crashes coming).\n")
 
 
+def _crash_line(crashes: dict) -> str:
+    if not crashes["crashed_cars"]:
+        return "Crashes: none.\n"
+    line = (f"Crashes: {crashes['crashed_cars']} cars crashed; {crashes['ran_into_priority']} of them ran into a car "
+            "with priority over them")
+    if crashes["ran_into_priority"]:
+        line += (f", at a median {100 * crashes['at_fault_speed_ratio_median']:.0f}% of their target speed "
+                 f"({100 * crashes['at_fault_full_speed_fraction']:.0f}% of them at {100 * FULL_SPEED_RATIO:.0f}% "
+                 "or more: no attempt to give way)")
+    return line + ".\n"
+
+
 def markdown(summary: dict) -> str:
     if not summary["encounter_steps"]:
         return ("No encounter steps: no car approached a zone with a priority car in view.\n\n"
-                + _risk_line(summary["risk"]))
+                + _risk_line(summary["risk"]) + "\n" + _crash_line(summary["crashes"]))
     return (
         "| | with priority cars | priority cars erased |\n|---|---|---|\n"
         f"| mean commanded acceleration [m/s^2] | {_number(summary['acceleration_with_mps2'])} | "
@@ -195,6 +228,7 @@ def markdown(summary: dict) -> str:
         f"lower the commanded acceleration by {_number(summary['mean_drop_mps2'])} m/s^2 on average; the car gives "
         f"way (a drop of at least {GIVE_WAY_MIN_MPS2} m/s^2) at {100 * summary['give_way_fraction']:.1f}% of "
         f"the steps and brakes at {100 * summary['braking_fraction']:.1f}%.\n\n" + _risk_line(summary["risk"])
+        + "\n" + _crash_line(summary["crashes"])
     )
 
 
@@ -214,7 +248,8 @@ def run_reaction(scenario: str, checkpoint: str, episodes: int, delay_max_s: flo
     summary = summarise(parts)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes": episodes, "delay_max_s": delay_max_s,
             "seed": seed, "workers": workers, "approach_window_m": APPROACH_WINDOW_M,
-            "give_way_min_mps2": GIVE_WAY_MIN_MPS2, "risk_horizon_steps": RISK_HORIZON_STEPS, "wall_s": round(time.monotonic() - started, 1),
+            "give_way_min_mps2": GIVE_WAY_MIN_MPS2, "risk_horizon_steps": RISK_HORIZON_STEPS,
+            "full_speed_ratio": FULL_SPEED_RATIO, "wall_s": round(time.monotonic() - started, 1),
             "command": command}
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = out_dir / f"reaction-{spec.name}"

@@ -106,6 +106,11 @@ class EpisodeSummary:
     mean_speed_mps: float
     return_acc: float
     return_sa: float
+    # a crash into a car with priority over this one (paper, "Reward Shaping": r_terminal -1, the
+    # car that should have given way); False for every other end, and for the car run into
+    crashed_into_priority: bool = False
+    final_speed_mps: float = 0.0  # speed at the last step [m/s] (at impact, for a crash)
+    target_speed_mps: float = 0.0  # the episode's target speed [m/s]
 
 
 @dataclass
@@ -230,6 +235,7 @@ class Simulator:
         self.speed_sum = np.zeros(k)
         self.return_acc = np.zeros(k)
         self.return_sa = np.zeros(k)
+        self.crashed_into_priority = np.zeros(k, dtype=bool)  # set by the step that ends an episode
         self.episode_count = np.zeros(k, dtype=np.int64)
         self.lane_of = np.zeros(k, dtype=np.intp)  # entry lane of each vehicle's current trip
         self.lane_of[: self.num_slots] = self.slot_lanes
@@ -320,6 +326,7 @@ class Simulator:
         moving = np.concatenate([idx, traffic_idx]) if len(traffic_idx) else idx
         reasons_all, crashed_into_higher_all = self._detect_ends(moving)
         reasons, crashed_into_higher = reasons_all[: len(idx)], crashed_into_higher_all[: len(idx)]
+        self.crashed_into_priority[idx] = crashed_into_higher
         self._reward(idx, reasons, crashed_into_higher, result)
         ended = np.zeros(k, dtype=bool)
         ended[idx] = reasons != EndReason.RUNNING
@@ -473,6 +480,8 @@ class Simulator:
             sign=SIGN_NAMES[Sign(int(self.sign[slot]))], end_reason=END_REASON_NAMES[reason], steps=steps,
             mean_speed_mps=float(self.speed_sum[slot] / max(steps, 1)),
             return_acc=float(self.return_acc[slot]), return_sa=float(self.return_sa[slot]),
+            crashed_into_priority=bool(reason == EndReason.CRASH and self.crashed_into_priority[slot]),
+            final_speed_mps=float(self.speed[slot]), target_speed_mps=float(self.target_speed[slot]),
         )
 
     # -- episodes, signs and waits ---------------------------------------------------------------

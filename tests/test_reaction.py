@@ -90,12 +90,31 @@ def test_reaction_end_to_end_and_a_refused_checkpoint(tmp_path):
     risk = summary["risk"]
     assert risk["steps"] > 0 and 0 <= risk["steps_before_a_crash"] <= risk["steps"]
     assert risk["value_crash_auc"] is None or 0.0 <= risk["value_crash_auc"] <= 1.0
+    crashes = summary["crashes"]
+    assert 0 <= crashes["ran_into_priority"] <= crashes["crashed_cars"]
+    assert "Crashes: " in (tmp_path / "out" / "reaction-easy.md").read_text()
     assert "# Reaction to priority cars, easy" in (tmp_path / "out" / "reaction-easy.md").read_text()
     bad = tmp_path / "bad.pt"
     bad.write_text("nope")
     refused = crossway("evaluate", "reaction", "--checkpoint", str(bad), "--out", str(tmp_path / "never"))
     assert refused.returncode != 0 and "is not a crossway checkpoint" in refused.stderr
     assert not (tmp_path / "never").exists()
+
+
+def test_crash_anatomy_by_hand():
+    from evaluation.reaction import crash_anatomy, markdown
+
+    # two cars ran into a car with priority (at 95% and 50% of their target speed), one was run into
+    anatomy = crash_anatomy([(True, 0.95), (False, 0.99), (True, 0.5)])
+    assert anatomy == {"crashed_cars": 3, "ran_into_priority": 2, "at_fault_speed_ratio_median": pytest.approx(0.725),
+                       "at_fault_full_speed_fraction": pytest.approx(0.5)}
+    assert crash_anatomy([(False, 1.0)]) == {"crashed_cars": 1, "ran_into_priority": 0}
+    assert crash_anatomy([]) == {"crashed_cars": 0, "ran_into_priority": 0}
+    risk = {"steps": 10, "steps_before_a_crash": 0, "value_crash_auc": None}
+    text = markdown({"encounter_steps": 0, "risk": risk, "crashes": anatomy})
+    assert "3 cars crashed; 2 of them ran into a car with priority over them, at a median 72% of their target" in text
+    assert "(50% of them at 90% or more" in text
+    assert "Crashes: none." in markdown({"encounter_steps": 0, "risk": risk, "crashes": crash_anatomy([])})
 
 
 def test_roc_auc_by_hand():

@@ -53,6 +53,20 @@ def test_crashed_cars_end_together_and_are_seen_one_last_time(medium_road):
     assert not result.acted.any() and not result.observed.any()
 
 
+def test_a_crash_summary_names_the_car_that_ran_into_priority_and_its_impact_speed(medium_road):
+    sim = medium_road
+    south = place(sim, "south_0", "straight", s=57.0, sign=2, speed=6.0, target_speed=9.0)  # stop sign
+    east = place(sim, "east_0", "straight", s=55.75, r=1.8, sign=0, speed=4.0, target_speed=8.0)  # no sign
+    assert sim.priorities(np.array([south, east]))[0, 1]  # east has priority over south
+    result = sim.step(still(sim))
+    by_lane = {e.lane: e for e in result.episodes}
+    assert by_lane["south_0"].end_reason == by_lane["east_0"].end_reason == "crash"
+    assert by_lane["south_0"].crashed_into_priority and not by_lane["east_0"].crashed_into_priority
+    # still(): zero acceleration, so the speeds at impact are the speeds placed
+    assert (by_lane["south_0"].final_speed_mps, by_lane["south_0"].target_speed_mps) == pytest.approx((6.0, 9.0))
+    assert (by_lane["east_0"].final_speed_mps, by_lane["east_0"].target_speed_mps) == pytest.approx((4.0, 8.0))
+
+
 def test_wrong_way_heading_is_off_path(medium_road):
     sim = medium_road
     slot = place(sim, "south_0", "straight", s=10.0, heading_offset=math.pi * 0.6, speed=0.0)
