@@ -10,9 +10,9 @@ import argparse
 import sys
 
 from crossway import __version__
-from crossway.commands import bench, distributed, evaluate, plot, render
+from crossway.commands import bench, distributed, evaluate, plot, pretrain, render
 
-COMMANDS = (distributed, evaluate, render, bench, plot)
+COMMANDS = (distributed, pretrain, evaluate, render, bench, plot)
 
 
 def build_parser() -> argparse.ArgumentParser:

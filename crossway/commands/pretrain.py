@@ -1,0 +1,81 @@
+"""``crossway pretrain``: a warm start for ``crossway train`` from a privileged scripted teacher."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "pretrain", help="warm-start a policy by imitating the scripted driver (not in the paper)",
+        description="Teach the network to drive by imitating the scripted driver, which reads the right of way "
+                    "from the simulator (information the network only gets through its views): every car's "
+                    "observation is labelled with the driver's action, and the value heads learn the discounted "
+                    "returns of the episodes driven. Episodes are driven by the teacher, then more and more by "
+                    "the network itself (DAgger). Writes OUT/pretrained.pt, which 'crossway train --init-from' "
+                    "and every 'crossway evaluate' take, and OUT/progress.csv. Not part of the paper's method, "
+                    "which learns from rewards alone (docs/training.md#warm-start-from-a-scripted-teacher).",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument("--scenario", default="easy", help="built-in scenario (easy, medium, hard) or a TOML path")
+    parser.add_argument("--minutes", type=float, default=10.0, help="wall-clock budget [min]")
+    parser.add_argument("--rounds", type=int, default=0,
+                        help="stop after this many rounds of collection and training (0: --minutes alone decides)")
+    parser.add_argument("--out", type=Path, default=Path("runs/pretrain"), help="output directory")
+    parser.add_argument("--init-from", type=Path, default=None, metavar="CHECKPOINT",
+                        help="start from these weights (a checkpoint or a models/*.pt policy); default: random")
+    parser.add_argument("--steps-per-round", type=int, default=500,
+                        help="simulator steps (0.1 s each) collected between training phases")
+    parser.add_argument("--reuse", type=float, default=4.0,
+                        help="how many times, on average, each collected sample is trained on")
+    parser.add_argument("--batch-size", type=int, default=64, help="samples per Adam step")
+    parser.add_argument("--learning-rate", type=float, default=3e-4, help="Adam step size")
+    parser.add_argument("--value-coef", type=float, default=0.5, help="weight of the value losses")
+    parser.add_argument("--gamma", type=float, default=0.99,
+                        help="discount of the value targets per 0.1 s step; use the one 'crossway train' will use")
+    parser.add_argument("--teacher-half-life", type=float, default=20_000.0, metavar="SAMPLES",
+                        help="a new episode is driven by the teacher with probability 0.5**(samples collected / "
+                             "SAMPLES), by the network otherwise (DAgger); 'inf': always the teacher")
+    parser.add_argument("--buffer-samples", type=int, default=40_000,
+                        help="replay capacity in samples (28 KB each: 40,000 take 1.1 GB)")
+    parser.add_argument("--delay-max", type=float, default=None, metavar="SECONDS",
+                        help="longest wait between a lane's episodes (default: the scenario's)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed")
+    parser.add_argument("--threads", type=int, default=2, help="torch threads for training")
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from learner.pretrain import PretrainConfig, run_pretrain
+    from simcore.scenario import load_scenario
+
+    load_scenario(args.scenario)  # a clear error for an unknown scenario before anything starts
+    if args.minutes <= 0:
+        raise ValueError(f"--minutes must be > 0, got {args.minutes}")
+    if args.rounds < 0:
+        raise ValueError(f"--rounds must be >= 0, got {args.rounds}")
+    if args.steps_per_round < 1 or args.batch_size < 1 or args.buffer_samples < 1 or args.threads < 1:
+        raise ValueError("--steps-per-round, --batch-size, --buffer-samples and --threads must be >= 1")
+    if not args.reuse > 0 or not args.learning_rate > 0 or not args.value_coef >= 0:
+        raise ValueError("--reuse and --learning-rate must be > 0, --value-coef >= 0")
+    if not 0.0 < args.gamma <= 1.0:
+        raise ValueError(f"--gamma must be in (0, 1], got {args.gamma}")
+    if not args.teacher_half_life > 0:
+        raise ValueError(f"--teacher-half-life must be > 0 samples, got {args.teacher_half_life}")
+    if args.delay_max is not None and not args.delay_max >= 0:
+        raise ValueError(f"--delay-max must be >= 0, got {args.delay_max}")
+    if args.init_from is not None:
+        from algo.policy import load_policy
+
+        load_policy(args.init_from)  # refuse a bad file before the simulator starts
+    config = PretrainConfig(
+        scenario=args.scenario, minutes=args.minutes, rounds=args.rounds, steps_per_round=args.steps_per_round, reuse=args.reuse,
+        batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef, gamma=args.gamma,
+        teacher_half_life=args.teacher_half_life, buffer_samples=args.buffer_samples, delay_max_s=args.delay_max,
+        seed=args.seed, init_from=args.init_from, torch_threads=args.threads)
+    command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True))
+    return 0

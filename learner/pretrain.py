@@ -1,0 +1,212 @@
+"""``crossway pretrain``: a warm start for D-A3C from a privileged scripted teacher (not in the paper).
+
+One process, no transport: a simulator whose every car is labelled by ``ScriptedDriver`` (which
+reads the right of way from the simulator) and driven either by it or by the student network,
+a ``DemonstrationBuffer`` and Adam on the imitation loss (``algo.imitation``). Rounds alternate
+collection and training. A new episode is driven by the teacher with probability
+0.5 ** (samples collected / ``teacher_half_life``): 1 at first, then less and less (DAgger, Ross
+et al. 2011), so that later data come from the states the student itself reaches. The output is an exported policy that
+``crossway train --init-from`` and every ``crossway evaluate`` take.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from collections import deque
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from algo.imitation import DemonstrationBuffer, Episode, imitation_loss, newest_frames
+from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy
+
+PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
+                    "action_loss_sa", "value_loss_acc", "value_loss_sa", "student_episodes",
+                    "student_reach_rate", "teacher_episodes", "teacher_reach_rate")
+ROLLING_EPISODES = 200  # reach rates are over each driver's last this many finished episodes
+
+
+@dataclass(frozen=True)
+class PretrainConfig:
+    scenario: str = "easy"
+    minutes: float = 10.0  # wall-clock budget [min]
+    rounds: int = 0  # stop after this many rounds as well (0: only the budget stops it)
+    steps_per_round: int = 500  # simulator steps collected between training phases (0.1 s each)
+    reuse: float = 4.0  # expected number of times each collected sample is trained on
+    batch_size: int = 64
+    learning_rate: float = 3e-4  # Adam
+    value_coef: float = 0.5  # weight of the value losses against the action losses
+    gamma: float = 0.99  # discount of the value targets (use the one D-A3C will train with)
+    teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
+    buffer_samples: int = 40_000  # replay capacity, 28 KB per sample
+    delay_max_s: float | None = None  # waits between a lane's episodes (None: the scenario's)
+    seed: int = 0
+    init_from: Path | None = None  # start from these weights (a checkpoint or an exported policy)
+    torch_threads: int = 2
+
+
+def _reach_rate(outcomes) -> float | None:
+    if not outcomes:
+        return None
+    return round(sum(o == "goal" for o in outcomes) / len(outcomes), 4)
+
+
+class Pretrainer:
+    """Collection and training, one round at a time; ``run`` loops until the budget is spent."""
+
+    def __init__(self, config: PretrainConfig, log=print):
+        from evaluation.policy import PolicyDriver  # noqa: F401 - fail early if evaluation is missing
+        from simcore.controller import ScriptedDriver
+        from simcore.simulator import SimConfig, Simulator
+
+        if config.minutes <= 0 or config.rounds < 0 or config.steps_per_round < 1 or config.batch_size < 1 or config.reuse <= 0:
+            raise ValueError("minutes, steps_per_round, batch_size and reuse must be positive")
+        if not config.teacher_half_life > 0:
+            raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
+        self.config = config
+        self.log = log
+        torch.manual_seed(config.seed)
+        torch.set_num_threads(config.torch_threads)
+        self.policy = load_policy(config.init_from) if config.init_from is not None else Policy(PolicyConfig())
+        self.policy.train()
+        self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=config.learning_rate)
+        sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
+        self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
+        self.teacher = ScriptedDriver(self.sim)
+        self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma)
+        self.rng = np.random.default_rng(config.seed)
+        self.result = self.sim.reset()
+        slots = self.sim.num_slots
+        self.episodes = [Episode.empty() for _ in range(slots)]
+        self.by_teacher = np.ones(slots, dtype=bool)  # who drives each slot's current episode
+        self.round = 0
+        self.updates = 0
+        # each driver's last finished episodes (end reasons), for the rolling reach rates
+        self.outcomes: dict[str, deque[str]] = {d: deque(maxlen=ROLLING_EPISODES) for d in ("student", "teacher")}
+        self.episodes_finished = {"student": 0, "teacher": 0}
+
+    @property
+    def teacher_probability(self) -> float:
+        """Probability that the teacher drives a new episode (DAgger's beta)."""
+        return 0.5 ** (self.buffer.added / self.config.teacher_half_life)
+
+    def collect(self, steps: int) -> None:
+        """Drive ``steps`` simulator steps, labelling every car's observation with the teacher's action."""
+        from evaluation.policy import PolicyDriver
+
+        sim = self.sim
+        student = PolicyDriver(sim, self.policy)
+        for _ in range(steps):
+            result = self.result
+            for slot in np.flatnonzero(result.started):
+                self.by_teacher[slot] = self.rng.random() < self.teacher_probability
+            teacher_actions = self.teacher.act()  # once per step: it keeps each car's waiting time
+            actions = teacher_actions.copy()
+            present = np.flatnonzero(sim.learners_present)
+            if (~self.by_teacher[present]).any():
+                student_actions = student.act(result)
+                actions[~self.by_teacher] = student_actions[~self.by_teacher]
+            frames = newest_frames(result.views[present])
+            targets = np.clip(teacher_actions[present] / ACTION_SCALE, -1.0, 1.0).astype(np.float32)
+            for k, slot in enumerate(present.tolist()):
+                episode = self.episodes[slot]
+                episode.frames.append(frames[k].copy())
+                episode.scalars.append(result.scalars[slot].copy())
+                episode.targets.append(targets[k])
+            self.result = result = sim.step(actions)
+            for slot in present.tolist():
+                self.episodes[slot].rewards.append((float(result.reward_acc[slot]), float(result.reward_sa[slot])))
+            for summary in result.episodes:
+                slot = summary.slot
+                self.buffer.add(self.episodes[slot], terminal=bool(result.terminated[slot]))
+                self.episodes[slot] = Episode.empty()
+                if result.terminated[slot]:
+                    driver = "teacher" if self.by_teacher[slot] else "student"
+                    self.outcomes[driver].append(summary.end_reason)
+                    self.episodes_finished[driver] += 1
+
+    def train(self, updates: int) -> dict:
+        """``updates`` Adam steps on minibatches drawn uniformly from the buffer; mean losses."""
+        totals: dict[str, float] = {}
+        for _ in range(updates):
+            batch = self.buffer.batch(self.buffer.sample_indices(self.config.batch_size, self.rng))
+            loss, metrics = imitation_loss(self.policy, batch, self.config.value_coef)
+            self.optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(self.policy.parameters(), 40.0)
+            self.optimizer.step()
+            self.updates += 1
+            for name, value in metrics.items():
+                totals[name] = totals.get(name, 0.0) + value
+        return {name: value / max(updates, 1) for name, value in totals.items()}
+
+    def run_round(self) -> dict:
+        before = self.buffer.added
+        probability = self.teacher_probability
+        self.collect(self.config.steps_per_round)
+        new_samples = self.buffer.added - before
+        updates = int(round(self.config.reuse * new_samples / self.config.batch_size)) if len(self.buffer) else 0
+        losses = self.train(updates) if updates and self.buffer.added > 3 else {}
+        row = {"round": self.round, "teacher_probability": round(probability, 4), "samples": self.buffer.added,
+               "updates": self.updates, **{k: round(v, 5) for k, v in losses.items()},
+               "student_episodes": self.episodes_finished["student"],
+               "student_reach_rate": _reach_rate(self.outcomes["student"]),
+               "teacher_episodes": self.episodes_finished["teacher"],
+               "teacher_reach_rate": _reach_rate(self.outcomes["teacher"])}
+        self.round += 1
+        return row
+
+    def export(self, path: Path, note: str) -> Path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        torch.save({"policy": self.policy.state_dict(), "policy_config": asdict(self.policy.config),
+                    "version": 0, "agent_steps": 0, "note": note,
+                    "pretrain": {**{k: str(v) if isinstance(v, Path) else v for k, v in asdict(self.config).items()},
+                                 "samples": self.buffer.added, "updates": self.updates, "rounds": self.round}},
+                   path)
+        return path
+
+
+def _fmt(rate: float | None) -> str:
+    return "  -  " if rate is None else f"{100 * rate:5.1f}%"
+
+
+def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print) -> Path:
+    """Rounds until ``config.minutes`` have passed (or ``config.rounds`` are done); writes
+    ``pretrained.pt``, ``pretrain.json`` and ``progress.csv``."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    trainer = Pretrainer(config, log=log)
+    log(f"pretrain {config.scenario}: teacher ScriptedDriver, buffer {config.buffer_samples} samples "
+        f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")
+    started = time.monotonic()
+    deadline = started + 60.0 * config.minutes
+    progress_path = out_dir / "progress.csv"
+    with progress_path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=PROGRESS_COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        while time.monotonic() < deadline and not (config.rounds and trainer.round >= config.rounds):
+            row = trainer.run_round()
+            row["wall_s"] = round(time.monotonic() - started, 1)
+            writer.writerow(row)
+            handle.flush()
+            elapsed = int(row["wall_s"])
+            losses = (f"action loss {row['action_loss_acc']:.4f}/{row['action_loss_sa']:.4f}  value loss "
+                      f"{row['value_loss_acc']:.4f}/{row['value_loss_sa']:.4f}" if "action_loss_acc" in row
+                      else "no update yet (episodes enter the buffer when they end)")
+            log(f"pretrain {elapsed // 60:02d}:{elapsed % 60:02d}  round {row['round']}  teacher drives "
+                f"{100 * row['teacher_probability']:3.0f}%  samples {row['samples']:,}  updates {row['updates']:,}  "
+                f"{losses}  reach (last {ROLLING_EPISODES}): student {_fmt(row['student_reach_rate'])} "
+                f"teacher {_fmt(row['teacher_reach_rate'])}")
+    wall = time.monotonic() - started
+    note = (f"{command}: {trainer.round} rounds, {trainer.buffer.added:,} samples, {trainer.updates:,} updates, "
+            f"{wall / 60:.1f} min")
+    path = trainer.export(out_dir / "pretrained.pt", note)
+    (out_dir / "pretrain.json").write_text(json.dumps(
+        {"command": command, "wall_s": round(wall, 1), "rounds": trainer.round, "samples": trainer.buffer.added,
+         "updates": trainer.updates, "config": {k: str(v) if isinstance(v, Path) else v
+                                                 for k, v in asdict(config).items()}}, indent=2))
+    log(f"wrote {path} and {progress_path} ({wall / 60:.1f} min)")
+    return path
