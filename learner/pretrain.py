@@ -27,6 +27,7 @@ from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy
 PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
                     "action_loss_sa", "value_loss_acc", "value_loss_sa", "student_episodes",
                     "student_reach_rate", "teacher_episodes", "teacher_reach_rate")
+TEACHER_SIGHTS = ("full", "view")
 ROLLING_EPISODES = 200  # reach rates are over each driver's last this many finished episodes
 
 
@@ -41,6 +42,7 @@ class PretrainConfig:
     learning_rate: float = 3e-4  # Adam
     value_coef: float = 0.5  # weight of the value losses against the action losses
     gamma: float = 0.99  # discount of the value targets (use the one D-A3C will train with)
+    teacher_sight: str = "full"  # "full": the teacher yields to every car with priority; "view": only to those its views show
     teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
     buffer_samples: int = 40_000  # replay capacity, 28 KB per sample
     delay_max_s: float | None = None  # waits between a lane's episodes (None: the scenario's)
@@ -65,6 +67,8 @@ class Pretrainer:
 
         if config.minutes <= 0 or config.rounds < 0 or config.steps_per_round < 1 or config.batch_size < 1 or config.reuse <= 0:
             raise ValueError("minutes, steps_per_round, batch_size and reuse must be positive")
+        if config.teacher_sight not in TEACHER_SIGHTS:
+            raise ValueError(f"teacher_sight must be one of {TEACHER_SIGHTS}, got {config.teacher_sight!r}")
         if not config.teacher_half_life > 0:
             raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
         self.config = config
@@ -76,7 +80,10 @@ class Pretrainer:
         self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=config.learning_rate)
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
-        self.teacher = ScriptedDriver(self.sim)
+        from simcore.views import VIEW_EXTENT_M
+
+        sight = 0.5 * VIEW_EXTENT_M if config.teacher_sight == "view" else None
+        self.teacher = ScriptedDriver(self.sim, sight_m=sight)
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()
@@ -179,7 +186,7 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     ``pretrained.pt``, ``pretrain.json`` and ``progress.csv``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     trainer = Pretrainer(config, log=log)
-    log(f"pretrain {config.scenario}: teacher ScriptedDriver, buffer {config.buffer_samples} samples "
+    log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}), buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")
     started = time.monotonic()
     deadline = started + 60.0 * config.minutes

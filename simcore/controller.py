@@ -7,6 +7,10 @@ model. It is not the paper's TTC baseline.
 Right of way: before a conflict zone it stops while a car with priority (``rightofway``) is in
 that zone or will reach it within ``YIELD_HORIZON_S``; after waiting ``PATIENCE_S`` at a stand
 it goes anyway, which breaks the rare priority cycles (three arms with equal signs).
+
+With ``sight_m`` set it only yields to cars with priority whose centre lies within the square
+of that half-side around it, aligned with its heading: ``VIEW_EXTENT_M / 2`` limits it to what a
+learner's views show (``crossway pretrain --teacher-sight view``).
 """
 
 from __future__ import annotations
@@ -28,8 +32,12 @@ SPEED_GAIN = 1.5  # proportional speed control [1/s]
 class ScriptedDriver:
     """Acts for every slot of a ``Simulator``; ``act()`` returns a ``[slots, 2]`` action array."""
 
-    def __init__(self, sim: Simulator, speed_fraction: float = 0.9, yield_to_priority: bool = True):
+    def __init__(self, sim: Simulator, speed_fraction: float = 0.9, yield_to_priority: bool = True,
+                 sight_m: float | None = None):
+        if sight_m is not None and not sight_m > 0:
+            raise ValueError(f"sight_m must be > 0 m or None, got {sight_m}")
         self.sim = sim
+        self.sight_m = sight_m  # half-side of the square around the car it looks into [m]; None: everywhere
         self.speed_fraction = speed_fraction  # cruise at this fraction of the target speed
         self.yield_to_priority = yield_to_priority
         self._standing_s = np.zeros(sim.num_slots)
@@ -43,6 +51,8 @@ class ScriptedDriver:
         if not learners.any():
             return actions
         higher = sim.priorities(idx) if self.yield_to_priority else np.zeros((len(idx),) * 2, bool)
+        if self.sight_m is not None:
+            higher &= self._in_sight(idx)
         zone_start = sim.priority.zone_start
         merge_at = sim.priority.merge_at
         half = 0.5 * VEHICLE_LENGTH
@@ -86,3 +96,12 @@ class ScriptedDriver:
         np.clip(actions[:, 0], -MAX_ACCELERATION, MAX_ACCELERATION, out=actions[:, 0])
         np.clip(actions[:, 1], -MAX_STEERING, MAX_STEERING, out=actions[:, 1])
         return actions
+
+    def _in_sight(self, idx: np.ndarray) -> np.ndarray:
+        """``out[a, b]``: car ``idx[b]``'s centre lies in the square of half-side ``sight_m`` around car ``idx[a]``."""
+        sim = self.sim
+        dx = sim.x[idx][None, :] - sim.x[idx][:, None]
+        dy = sim.y[idx][None, :] - sim.y[idx][:, None]
+        cos, sin = np.cos(sim.heading[idx])[:, None], np.sin(sim.heading[idx])[:, None]
+        ahead, left = dx * cos + dy * sin, dy * cos - dx * sin
+        return (np.abs(ahead) <= self.sight_m) & (np.abs(left) <= self.sight_m)

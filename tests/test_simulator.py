@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import empty_simulator, place, still
+from conftest import empty_simulator, place, route_index, still
 from simcore.controller import ScriptedDriver
 from simcore.dynamics import MAX_STEERING, WHEELBASE
 from simcore.rewards import EndReason
@@ -231,3 +231,24 @@ def test_same_seed_same_run_different_seed_different_run():
     assert episodes_a == episodes_b
     assert not np.array_equal(state_a, state_c)
     assert episodes_a != episodes_c
+
+
+@pytest.mark.parametrize("priority_car_before_zone_m, view_sight_yields", [
+    (12.0, True),  # near: 15 m to the right, 15 m ahead, inside the 50 x 50 m the learner's views show
+    (34.0, False),  # 34 m out at 8 m/s it reaches the zone within 5 s, but lies 37 m to the right
+])
+def test_a_teacher_with_the_views_sight_yields_only_to_cars_it_could_see(
+        medium_road, priority_car_before_zone_m, view_sight_yields):
+    sim = medium_road
+    south_route, east_route = route_index(sim, "south_0", "straight"), route_index(sim, "east_0", "straight")
+    zone_south = sim.priority.zone_start[south_route, east_route]
+    zone_east = sim.priority.zone_start[east_route, south_route]
+    south = place(sim, "south_0", "straight", s=zone_south - 12.0, sign=2, speed=8.0)  # stop sign, 12 m out
+    place(sim, "east_0", "straight", s=zone_east - priority_car_before_zone_m, sign=0, speed=8.0)  # no sign
+    cruise = ScriptedDriver(sim, yield_to_priority=False).act()[south, 0]  # speed keeping alone
+    full = ScriptedDriver(sim).act()[south, 0]
+    view = ScriptedDriver(sim, sight_m=25.0).act()[south, 0]
+    assert full == -3.0 and cruise > -2.0  # the privileged teacher stops for the car either way
+    assert view == (full if view_sight_yields else cruise)
+    with pytest.raises(ValueError, match="sight_m"):
+        ScriptedDriver(sim, sight_m=0.0)

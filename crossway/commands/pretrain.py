@@ -36,6 +36,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--value-coef", type=float, default=0.5, help="weight of the value losses")
     parser.add_argument("--gamma", type=float, default=0.99,
                         help="discount of the value targets per 0.1 s step; use the one 'crossway train' will use")
+    parser.add_argument("--teacher-sight", choices=("full", "view"), default="full",
+                        help="full: the teacher yields to every car with priority, wherever it is; view: only to "
+                             "those inside the 50 x 50 m its views show, so that its labels follow from the "
+                             "network's input")
     parser.add_argument("--teacher-half-life", type=float, default=20_000.0, metavar="SAMPLES",
                         help="a new episode is driven by the teacher with probability 0.5**(samples collected / "
                              "SAMPLES), by the network otherwise (DAgger); 'inf': always the teacher")
@@ -74,7 +78,7 @@ def run(args) -> int:
     config = PretrainConfig(
         scenario=args.scenario, minutes=args.minutes, rounds=args.rounds, steps_per_round=args.steps_per_round, reuse=args.reuse,
         batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef, gamma=args.gamma,
-        teacher_half_life=args.teacher_half_life, buffer_samples=args.buffer_samples, delay_max_s=args.delay_max,
+        teacher_sight=args.teacher_sight, teacher_half_life=args.teacher_half_life, buffer_samples=args.buffer_samples, delay_max_s=args.delay_max,
         seed=args.seed, init_from=args.init_from, torch_threads=args.threads)
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True))
