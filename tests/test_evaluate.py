@@ -49,6 +49,17 @@ def test_table1_scripted_end_to_end(tmp_path):
     assert "(paper)" in (tmp_path / "table1-easy.md").read_text()
 
 
+def test_table1_scripted_with_the_views_sight(tmp_path):
+    result = crossway("evaluate", "table1", "--scripted", "--scripted-sight", "view", "--scenario", "easy",
+                      "--episodes", "3", "--workers", "1", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    report = json.loads((tmp_path / "table1-easy.json").read_text())
+    assert report["meta"]["scripted_sight_m"] == 25.0  # half the 50 m view
+    refused = crossway("evaluate", "table1", "--checkpoint", str(tmp_path / "x.pt"), "--scripted-sight", "view",
+                       "--out", str(tmp_path / "never"))
+    assert refused.returncode == 2 and "--scripted-sight goes with --scripted" in refused.stderr
+
+
 def test_table1_with_a_checkpoint_and_a_refused_one(tmp_path):
     good = tmp_path / "good.pt"
     torch.save(LearnerCore().state_dict(), good)

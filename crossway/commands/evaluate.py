@@ -24,6 +24,10 @@ def add_parser(subparsers) -> None:
                     "episodes, run in parallel worker processes; results per traffic sign averaged over "
                     "the tests.", formatter_class=fmt)
     _add_policy_options(table1, scripted=True, scenario=True)
+    table1.add_argument("--scripted-sight", choices=("full", "view"), default=None,
+                        help="with --scripted: full (default) yields to every car with priority; view only to those "
+                             "inside the 50 x 50 m a learner's views show (the teacher of 'crossway pretrain "
+                             "--teacher-sight view')")
     _add_run_options(table1, episodes=3000, episodes_help="episodes per test (the paper: 3000)")
     table1.set_defaults(func=run_table1_command)
 
@@ -110,8 +114,14 @@ def _checked(args) -> str | None:
 def run_table1_command(args) -> int:
     from evaluation.table1 import markdown, run_table1
 
-    report = run_table1(args.scenario, _checked(args), args.episodes, args.workers, args.seed, args.out,
-                        _command_line())
+    checkpoint = _checked(args)
+    if args.scripted_sight is not None and checkpoint is not None:
+        raise ValueError("--scripted-sight goes with --scripted, not with --checkpoint")
+    from simcore.views import VIEW_EXTENT_M
+
+    sight = 0.5 * VIEW_EXTENT_M if args.scripted_sight == "view" else None
+    report = run_table1(args.scenario, checkpoint, args.episodes, args.workers, args.seed, args.out,
+                        _command_line(), scripted_sight_m=sight)
     print(markdown(report["meta"]["scenario"], report["table"]), end="")
     print("wrote " + ", ".join(str(p) for p in report["paths"]) + f" in {report['meta']['wall_s']} s")
     return 0
