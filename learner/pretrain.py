@@ -194,19 +194,22 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     with progress_path.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=PROGRESS_COLUMNS, extrasaction="ignore")
         writer.writeheader()
-        while time.monotonic() < deadline and not (config.rounds and trainer.round >= config.rounds):
-            row = trainer.run_round()
-            row["wall_s"] = round(time.monotonic() - started, 1)
-            writer.writerow(row)
-            handle.flush()
-            elapsed = int(row["wall_s"])
-            losses = (f"action loss {row['action_loss_acc']:.4f}/{row['action_loss_sa']:.4f}  value loss "
-                      f"{row['value_loss_acc']:.4f}/{row['value_loss_sa']:.4f}" if "action_loss_acc" in row
-                      else "no update yet (episodes enter the buffer when they end)")
-            log(f"pretrain {elapsed // 60:02d}:{elapsed % 60:02d}  round {row['round']}  teacher drives "
-                f"{100 * row['teacher_probability']:3.0f}%  samples {row['samples']:,}  updates {row['updates']:,}  "
-                f"{losses}  reach (last {ROLLING_EPISODES}): student {_fmt(row['student_reach_rate'])} "
-                f"teacher {_fmt(row['teacher_reach_rate'])}")
+        try:
+            while time.monotonic() < deadline and not (config.rounds and trainer.round >= config.rounds):
+                row = trainer.run_round()
+                row["wall_s"] = round(time.monotonic() - started, 1)
+                writer.writerow(row)
+                handle.flush()
+                elapsed = int(row["wall_s"])
+                losses = (f"action loss {row['action_loss_acc']:.4f}/{row['action_loss_sa']:.4f}  value loss "
+                          f"{row['value_loss_acc']:.4f}/{row['value_loss_sa']:.4f}" if "action_loss_acc" in row
+                          else "no update yet (episodes enter the buffer when they end)")
+                log(f"pretrain {elapsed // 60:02d}:{elapsed % 60:02d}  round {row['round']}  teacher drives "
+                    f"{100 * row['teacher_probability']:3.0f}%  samples {row['samples']:,}  updates {row['updates']:,}  "
+                    f"{losses}  reach (last {ROLLING_EPISODES}): student {_fmt(row['student_reach_rate'])} "
+                    f"teacher {_fmt(row['teacher_reach_rate'])}")
+        except KeyboardInterrupt:  # Ctrl-C: keep what was learnt, as crossway train does
+            log("pretrain: interrupted, writing the policy as it is")
     wall = time.monotonic() - started
     note = (f"{command}: {trainer.round} rounds, {trainer.buffer.added:,} samples, {trainer.updates:,} updates, "
             f"{wall / 60:.1f} min")

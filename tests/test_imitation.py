@@ -144,3 +144,23 @@ def test_pretrain_refuses_a_bad_initial_checkpoint(tmp_path):
     result = crossway("pretrain", "--init-from", str(bad), "--out", str(tmp_path / "never"))
     assert result.returncode == 2 and "is not a crossway checkpoint" in result.stderr
     assert not (tmp_path / "never").exists()
+
+
+def test_ctrl_c_writes_the_policy_learnt_so_far(tmp_path):
+    import signal
+    import time
+
+    out = tmp_path / "pre"
+    process = subprocess.Popen([sys.executable, "-m", "crossway", "pretrain", "--scenario", "easy", "--minutes", "5",
+                                "--steps-per-round", "150", "--threads", "1", "--out", str(out)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    progress = out / "progress.csv"
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and (not progress.exists() or len(progress.read_text().splitlines()) < 3):
+        time.sleep(0.5)  # wait for two rounds: the loop is running
+    process.send_signal(signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 0, stderr
+    assert "interrupted, writing the policy" in stdout
+    load_policy(out / "pretrained.pt")
+    assert (out / "pretrain.json").exists()

@@ -15,7 +15,7 @@ def add_parser(subparsers) -> None:
                     "from the simulator (information the network only gets through its views): every car's "
                     "observation is labelled with the driver's action, and the value heads learn the discounted "
                     "returns of the episodes driven. Episodes are driven by the teacher, then more and more by "
-                    "the network itself (DAgger). Writes OUT/pretrained.pt, which 'crossway train --init-from' "
+                    "the network itself (DAgger). Writes OUT/pretrained.pt (also on Ctrl-C), which 'crossway train --init-from' "
                     "and every 'crossway evaluate' take, and OUT/progress.csv. Not part of the paper's method, "
                     "which learns from rewards alone (docs/training.md#warm-start-from-a-scripted-teacher).",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
