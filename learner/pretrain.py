@@ -42,7 +42,8 @@ class PretrainConfig:
     learning_rate: float = 3e-4  # Adam
     value_coef: float = 0.5  # weight of the value losses against the action losses
     gamma: float = 0.99  # discount of the value targets (use the one D-A3C will train with)
-    teacher_sight: str = "full"  # "full": the teacher yields to every car with priority; "view": only to those its views show
+    # "full": the teacher yields to every car with priority; "view": only to those its views show
+    teacher_sight: str = "full"
     teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
     buffer_samples: int = 40_000  # replay capacity, 28 KB per sample
     delay_max_s: float | None = None  # waits between a lane's episodes (None: the scenario's)
@@ -65,7 +66,8 @@ class Pretrainer:
         from simcore.controller import ScriptedDriver
         from simcore.simulator import SimConfig, Simulator
 
-        if config.minutes <= 0 or config.rounds < 0 or config.steps_per_round < 1 or config.batch_size < 1 or config.reuse <= 0:
+        if (config.minutes <= 0 or config.rounds < 0 or config.steps_per_round < 1 or config.batch_size < 1
+                or config.reuse <= 0):
             raise ValueError("minutes, steps_per_round, batch_size and reuse must be positive")
         if config.teacher_sight not in TEACHER_SIGHTS:
             raise ValueError(f"teacher_sight must be one of {TEACHER_SIGHTS}, got {config.teacher_sight!r}")
@@ -186,7 +188,8 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     ``pretrained.pt``, ``pretrain.json`` and ``progress.csv``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     trainer = Pretrainer(config, log=log)
-    log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}), buffer {config.buffer_samples} samples "
+    log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}), "
+        f"buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")
     started = time.monotonic()
     deadline = started + 60.0 * config.minutes
@@ -205,7 +208,8 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
                           f"{row['value_loss_acc']:.4f}/{row['value_loss_sa']:.4f}" if "action_loss_acc" in row
                           else "no update yet (episodes enter the buffer when they end)")
                 log(f"pretrain {elapsed // 60:02d}:{elapsed % 60:02d}  round {row['round']}  teacher drives "
-                    f"{100 * row['teacher_probability']:3.0f}%  samples {row['samples']:,}  updates {row['updates']:,}  "
+                    f"{100 * row['teacher_probability']:3.0f}%  samples {row['samples']:,}  "
+                    f"updates {row['updates']:,}  "
                     f"{losses}  reach (last {ROLLING_EPISODES}): student {_fmt(row['student_reach_rate'])} "
                     f"teacher {_fmt(row['teacher_reach_rate'])}")
         except KeyboardInterrupt:  # Ctrl-C: keep what was learnt, as crossway train does

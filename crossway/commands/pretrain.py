@@ -15,9 +15,10 @@ def add_parser(subparsers) -> None:
                     "from the simulator (information the network only gets through its views): every car's "
                     "observation is labelled with the driver's action, and the value heads learn the discounted "
                     "returns of the episodes driven. Episodes are driven by the teacher, then more and more by "
-                    "the network itself (DAgger). Writes OUT/pretrained.pt (also on Ctrl-C), which 'crossway train --init-from' "
-                    "and every 'crossway evaluate' take, and OUT/progress.csv. Not part of the paper's method, "
-                    "which learns from rewards alone (docs/training.md#warm-start-from-a-scripted-teacher).",
+                    "the network itself (DAgger). Writes OUT/pretrained.pt (also on Ctrl-C), which "
+                    "'crossway train --init-from' and every 'crossway evaluate' take, and OUT/progress.csv. "
+                    "Not part of the paper's method, which learns from rewards alone "
+                    "(docs/training.md#warm-start-from-a-scripted-teacher).",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--scenario", default="easy", help="built-in scenario (easy, medium, hard) or a TOML path")
@@ -76,10 +77,11 @@ def run(args) -> int:
 
         load_policy(args.init_from)  # refuse a bad file before the simulator starts
     config = PretrainConfig(
-        scenario=args.scenario, minutes=args.minutes, rounds=args.rounds, steps_per_round=args.steps_per_round, reuse=args.reuse,
-        batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef, gamma=args.gamma,
-        teacher_sight=args.teacher_sight, teacher_half_life=args.teacher_half_life, buffer_samples=args.buffer_samples, delay_max_s=args.delay_max,
-        seed=args.seed, init_from=args.init_from, torch_threads=args.threads)
+        scenario=args.scenario, minutes=args.minutes, rounds=args.rounds, steps_per_round=args.steps_per_round,
+        reuse=args.reuse, batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef,
+        gamma=args.gamma, teacher_sight=args.teacher_sight, teacher_half_life=args.teacher_half_life,
+        buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
+        torch_threads=args.threads)
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True))
     return 0
