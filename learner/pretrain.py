@@ -5,8 +5,8 @@ reads the right of way from the simulator) and driven either by it or by the stu
 a ``DemonstrationBuffer`` and Adam on the imitation loss (``algo.imitation``). Rounds alternate
 collection and training. A new episode is driven by the teacher with probability
 0.5 ** (samples collected / ``teacher_half_life``): 1 at first, then less and less (DAgger, Ross
-et al. 2011), so that later data come from the states the student itself reaches. The output is an exported policy that
-``crossway train --init-from`` and every ``crossway evaluate`` take.
+et al. 2011), so that later data come from the states the student itself reaches. The output is
+an exported policy that ``crossway train --init-from`` and every ``crossway evaluate`` take.
 """
 
 from __future__ import annotations
@@ -52,6 +52,11 @@ class PretrainConfig:
     torch_threads: int = 2
 
 
+def _config_dict(config: PretrainConfig) -> dict:
+    """The settings as JSON-friendly values (paths as text)."""
+    return {k: str(v) if isinstance(v, Path) else v for k, v in asdict(config).items()}
+
+
 def _reach_rate(outcomes) -> float | None:
     if not outcomes:
         return None
@@ -59,11 +64,10 @@ def _reach_rate(outcomes) -> float | None:
 
 
 class Pretrainer:
-    """Collection and training, one round at a time; ``run`` loops until the budget is spent."""
+    """Collection and training, one round at a time; ``run_pretrain`` loops until the budget is spent."""
 
-    def __init__(self, config: PretrainConfig, log=print):
-        from evaluation.policy import PolicyDriver  # noqa: F401 - fail early if evaluation is missing
-        from simcore.controller import ScriptedDriver
+    def __init__(self, config: PretrainConfig):
+        from simcore.controller import VIEW_SIGHT_M, ScriptedDriver
         from simcore.simulator import SimConfig, Simulator
 
         if (config.minutes <= 0 or config.rounds < 0 or config.steps_per_round < 1 or config.batch_size < 1
@@ -74,7 +78,6 @@ class Pretrainer:
         if not config.teacher_half_life > 0:
             raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
         self.config = config
-        self.log = log
         torch.manual_seed(config.seed)
         torch.set_num_threads(config.torch_threads)
         self.policy = load_policy(config.init_from) if config.init_from is not None else Policy(PolicyConfig())
@@ -82,10 +85,7 @@ class Pretrainer:
         self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=config.learning_rate)
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
-        from simcore.views import VIEW_EXTENT_M
-
-        sight = 0.5 * VIEW_EXTENT_M if config.teacher_sight == "view" else None
-        self.teacher = ScriptedDriver(self.sim, sight_m=sight)
+        self.teacher = ScriptedDriver(self.sim, sight_m=VIEW_SIGHT_M if config.teacher_sight == "view" else None)
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()
@@ -158,8 +158,8 @@ class Pretrainer:
         probability = self.teacher_probability
         self.collect(self.config.steps_per_round)
         new_samples = self.buffer.added - before
-        updates = int(round(self.config.reuse * new_samples / self.config.batch_size)) if len(self.buffer) else 0
-        losses = self.train(updates) if updates and self.buffer.added > 3 else {}
+        updates = int(round(self.config.reuse * new_samples / self.config.batch_size))
+        losses = self.train(updates) if updates else {}
         row = {"round": self.round, "teacher_probability": round(probability, 4), "samples": self.buffer.added,
                "updates": self.updates, **{k: round(v, 5) for k, v in losses.items()},
                "student_episodes": self.episodes_finished["student"],
@@ -173,8 +173,8 @@ class Pretrainer:
         path.parent.mkdir(parents=True, exist_ok=True)
         torch.save({"policy": self.policy.state_dict(), "policy_config": asdict(self.policy.config),
                     "version": 0, "agent_steps": 0, "note": note,
-                    "pretrain": {**{k: str(v) if isinstance(v, Path) else v for k, v in asdict(self.config).items()},
-                                 "samples": self.buffer.added, "updates": self.updates, "rounds": self.round}},
+                    "pretrain": {**_config_dict(self.config), "samples": self.buffer.added,
+                                 "updates": self.updates, "rounds": self.round}},
                    path)
         return path
 
@@ -187,7 +187,7 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     """Rounds until ``config.minutes`` have passed (or ``config.rounds`` are done); writes
     ``pretrained.pt``, ``pretrain.json`` and ``progress.csv``."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    trainer = Pretrainer(config, log=log)
+    trainer = Pretrainer(config)
     log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}), "
         f"buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")
@@ -220,7 +220,6 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     path = trainer.export(out_dir / "pretrained.pt", note)
     (out_dir / "pretrain.json").write_text(json.dumps(
         {"command": command, "wall_s": round(wall, 1), "rounds": trainer.round, "samples": trainer.buffer.added,
-         "updates": trainer.updates, "config": {k: str(v) if isinstance(v, Path) else v
-                                                 for k, v in asdict(config).items()}}, indent=2))
+         "updates": trainer.updates, "config": _config_dict(config)}, indent=2))
     log(f"wrote {path} and {progress_path} ({wall / 60:.1f} min)")
     return path

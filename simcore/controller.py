@@ -9,7 +9,7 @@ that zone or will reach it within ``YIELD_HORIZON_S``; after waiting ``PATIENCE_
 it goes anyway, which breaks the rare priority cycles (three arms with equal signs).
 
 With ``sight_m`` set it only yields to cars with priority whose centre lies within the square
-of that half-side around it, aligned with its heading: ``VIEW_EXTENT_M / 2`` limits it to what a
+of that half-side around it, aligned with its heading: ``VIEW_SIGHT_M`` limits it to what a
 learner's views show (``crossway pretrain --teacher-sight view``).
 """
 
@@ -21,12 +21,14 @@ import numpy as np
 
 from simcore.dynamics import DT, MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
 from simcore.simulator import Simulator
+from simcore.views import VIEW_EXTENT_M
 
 STOP_MARGIN_M = 2.0  # stop this far before a conflict zone [m]
 YIELD_HORIZON_S = 5.0  # yield to a car with priority that reaches the conflict within this time [s]
 PATIENCE_S = 4.0  # after standing this long, go [s]
 FOLLOW_GAP_M = 4.0  # bumper-to-bumper gap kept behind a car on a shared lane [m]
 SPEED_GAIN = 1.5  # proportional speed control [1/s]
+VIEW_SIGHT_M = 0.5 * VIEW_EXTENT_M  # half-side of the square a learner's views show [m]
 
 
 class ScriptedDriver:
@@ -98,7 +100,8 @@ class ScriptedDriver:
         return actions
 
     def _in_sight(self, idx: np.ndarray) -> np.ndarray:
-        """``out[a, b]``: car ``idx[b]``'s centre lies in the square of half-side ``sight_m`` around car ``idx[a]``."""
+        """``out[a, b]``: car ``idx[b]``'s centre lies in the square of half-side ``sight_m`` around
+        car ``idx[a]``, aligned with ``idx[a]``'s heading."""
         sim = self.sim
         dx = sim.x[idx][None, :] - sim.x[idx][:, None]
         dy = sim.y[idx][None, :] - sim.y[idx][:, None]

@@ -91,7 +91,7 @@ def test_training_on_the_teachers_labels_brings_the_network_towards_them():
     from learner.pretrain import PretrainConfig, Pretrainer
 
     trainer = Pretrainer(PretrainConfig(scenario="easy", teacher_half_life=float("inf"), learning_rate=1e-3,
-                                        torch_threads=1), log=lambda line: None)
+                                        torch_threads=1))
     trainer.collect(400)
     assert trainer.buffer.added > 200 and trainer.episodes_finished["teacher"] > 0
     assert trainer.episodes_finished["student"] == 0 and not trainer.outcomes["student"]
@@ -136,6 +136,20 @@ def test_pretrain_refuses_bad_input(tmp_path, args, message):
     result = crossway("pretrain", "--out", str(tmp_path / "never"), *args)
     assert result.returncode == 2 and message in result.stderr
     assert not (tmp_path / "never").exists()
+
+
+def test_pretrain_refuses_to_overwrite_a_finished_policy_or_write_into_a_file(tmp_path):
+    out = tmp_path / "pre"
+    out.mkdir()
+    (out / "pretrained.pt").write_bytes(b"fifteen minutes of work")
+    result = crossway("pretrain", "--out", str(out))
+    assert result.returncode == 2 and "pretrained.pt' exists" in result.stderr
+    assert (out / "pretrained.pt").read_bytes() == b"fifteen minutes of work"
+    assert not (out / "progress.csv").exists()
+    a_file = tmp_path / "file"
+    a_file.write_text("x")
+    result = crossway("pretrain", "--out", str(a_file))
+    assert result.returncode == 2 and "is a file" in result.stderr
 
 
 def test_pretrain_refuses_a_bad_initial_checkpoint(tmp_path):

@@ -117,9 +117,9 @@ def run_table1_command(args) -> int:
     checkpoint = _checked(args)
     if args.scripted_sight is not None and checkpoint is not None:
         raise ValueError("--scripted-sight goes with --scripted, not with --checkpoint")
-    from simcore.views import VIEW_EXTENT_M
+    from simcore.controller import VIEW_SIGHT_M
 
-    sight = 0.5 * VIEW_EXTENT_M if args.scripted_sight == "view" else None
+    sight = VIEW_SIGHT_M if args.scripted_sight == "view" else None
     report = run_table1(args.scenario, checkpoint, args.episodes, args.workers, args.seed, args.out,
                         _command_line(), scripted_sight_m=sight)
     print(markdown(report["meta"]["scenario"], report["table"]), end="")

@@ -72,6 +72,11 @@ def run(args) -> int:
         raise ValueError(f"--teacher-half-life must be > 0 samples, got {args.teacher_half_life}")
     if args.delay_max is not None and not args.delay_max >= 0:
         raise ValueError(f"--delay-max must be >= 0, got {args.delay_max}")
+    if args.out.exists() and not args.out.is_dir():
+        raise ValueError(f"--out {str(args.out)!r} is a file, not a directory")
+    if (args.out / "pretrained.pt").exists():
+        raise ValueError(f"{str(args.out / 'pretrained.pt')!r} exists: choose another --out, or move it away first "
+                         "(nothing is overwritten)")
     if args.init_from is not None:
         from algo.policy import load_policy
 
