@@ -42,6 +42,7 @@ class TestSpec:
     seed: int
     checkpoint: str | None  # None: the scripted driver (a stand-in for tests and smoke runs)
     scripted_sight_m: float | None = None  # the scripted driver yields only to cars this near (ScriptedDriver)
+    scripted_approach_mps: float | None = None  # the scripted driver's speed at a conflict zone (ScriptedDriver)
 
 
 def delay_schedule(training_delay_max_s: float) -> list[float]:
@@ -66,7 +67,8 @@ def run_test(spec: TestSpec, progress=None) -> dict:
         driver = PolicyDriver(sim, load_policy(spec.checkpoint))
         act = lambda: driver.act(result)  # noqa: E731 - reads the newest result
     else:
-        act = ScriptedDriver(sim, sight_m=spec.scripted_sight_m).act
+        act = ScriptedDriver(sim, sight_m=spec.scripted_sight_m,
+                             approach_speed_mps=spec.scripted_approach_mps).act
     counts: dict[str, Counter] = defaultdict(Counter)
     speed_sum: Counter = Counter()
     done = 0
@@ -159,7 +161,8 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
 
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
-               out_dir: Path, command: str, scripted_sight_m: float | None = None) -> dict:
+               out_dir: Path, command: str, scripted_sight_m: float | None = None,
+               scripted_approach_mps: float | None = None) -> dict:
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
@@ -167,12 +170,13 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
         from evaluation.policy import load_policy
 
         load_policy(checkpoint)  # refuse a bad checkpoint before starting workers
-    tests = [TestSpec(spec.name, d, episodes, seed + i, checkpoint, scripted_sight_m)
+    tests = [TestSpec(spec.name, d, episodes, seed + i, checkpoint, scripted_sight_m, scripted_approach_mps)
              for i, d in enumerate(delay_schedule(spec.episodes.delay_max_s))]
     # each test runs as chunks of at most CHUNK_EPISODES episodes (own simulator, own seed), so
     # every worker stays busy to the end; the chunks do not depend on --workers
     chunks = [TestSpec(t.scenario, t.delay_max_s, min(CHUNK_EPISODES, t.episodes - start),
-                       t.seed + 1000 * (start // CHUNK_EPISODES), t.checkpoint, t.scripted_sight_m)
+                       t.seed + 1000 * (start // CHUNK_EPISODES), t.checkpoint, t.scripted_sight_m,
+                       t.scripted_approach_mps)
               for t in tests for start in range(0, t.episodes, CHUNK_EPISODES)]
     started = time.monotonic()
     parts = run_parallel(run_test, [(c,) for c in chunks], episodes * len(tests), workers, f"table1 {spec.name}")
@@ -180,7 +184,7 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
     table = summarise(results)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
             "delays_max_s": [t.delay_max_s for t in tests], "seed": seed, "workers": workers,
-            "scripted_sight_m": scripted_sight_m,
+            "scripted_sight_m": scripted_sight_m, "scripted_approach_mps": scripted_approach_mps,
             "wall_s": round(time.monotonic() - started, 1), "command": command}
     paths = write_outputs(out_dir, spec.name, results, table, meta)
     return {"table": table, "paths": paths, "meta": meta}

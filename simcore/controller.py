@@ -11,6 +11,12 @@ it goes anyway, which breaks the rare priority cycles (three arms with equal sig
 With ``sight_m`` set it only yields to cars with priority whose centre lies within the square
 of that half-side around it, aligned with its heading: ``VIEW_SIGHT_M`` limits it to what a
 learner's views show (``crossway pretrain --teacher-sight view``).
+
+With ``approach_speed_mps`` set it also drives as if a car with priority could appear at any
+moment: before each conflict zone it shares with a route that would have priority over its own
+(by the signs now on the arms and priority to the right), it slows so that it reaches the zone's
+stop point at no more than that speed, braking at ``APPROACH_DECELERATION``. A driver limited to
+its views needs this (the paper's hard agents average 5.9 m/s at stop signs, Table I).
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ import math
 import numpy as np
 
 from simcore.dynamics import DT, MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
+from simcore.rightofway import SIGN_RANK
 from simcore.simulator import Simulator
 from simcore.views import VIEW_EXTENT_M
 
@@ -29,20 +36,28 @@ PATIENCE_S = 4.0  # after standing this long, go [s]
 FOLLOW_GAP_M = 4.0  # bumper-to-bumper gap kept behind a car on a shared lane [m]
 SPEED_GAIN = 1.5  # proportional speed control [1/s]
 VIEW_SIGHT_M = 0.5 * VIEW_EXTENT_M  # half-side of the square a learner's views show [m]
+APPROACH_DECELERATION = 2.0  # comfortable braking towards a conflict zone's approach speed [m/s^2]
 
 
 class ScriptedDriver:
     """Acts for every slot of a ``Simulator``; ``act()`` returns a ``[slots, 2]`` action array."""
 
     def __init__(self, sim: Simulator, speed_fraction: float = 0.9, yield_to_priority: bool = True,
-                 sight_m: float | None = None):
+                 sight_m: float | None = None, approach_speed_mps: float | None = None):
         if sight_m is not None and not sight_m > 0:
             raise ValueError(f"sight_m must be > 0 m or None, got {sight_m}")
+        if approach_speed_mps is not None and not approach_speed_mps >= 0:
+            raise ValueError(f"approach_speed_mps must be >= 0 m/s or None, got {approach_speed_mps}")
+        # speed at the stop point of a conflict zone with a route that may have priority [m/s]
+        self.approach_speed_mps = approach_speed_mps
         self.sim = sim
         self.sight_m = sight_m  # half-side of the square around the car it looks into [m]; None: everywhere
         self.speed_fraction = speed_fraction  # cruise at this fraction of the target speed
         self.yield_to_priority = yield_to_priority
         self._standing_s = np.zeros(sim.num_slots)
+        lanes = sim.intersection.lanes
+        self._entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])  # per route
+        self._entry_branch = np.array([lanes[e].branch for e in self._entry_lane])  # per route
 
     def act(self) -> np.ndarray:
         sim = self.sim
@@ -56,6 +71,8 @@ class ScriptedDriver:
         if self.sight_m is not None:
             higher &= self._in_sight(idx)
         zone_start = sim.priority.zone_start
+        if self.approach_speed_mps is not None:
+            route_rank = SIGN_RANK[sim.branch_signs[self._entry_branch]]
         merge_at = sim.priority.merge_at
         half = 0.5 * VEHICLE_LENGTH
         for a, slot in enumerate(idx.tolist()):
@@ -69,7 +86,14 @@ class ScriptedDriver:
             tx, ty = path.position(sim.s[slot] + lookahead, 0.0)
             alpha = math.atan2(ty - sim.y[slot], tx - sim.x[slot]) - sim.heading[slot]
             steering = math.atan2(2.0 * WHEELBASE * math.sin(alpha), lookahead)
-            acceleration = SPEED_GAIN * (self.speed_fraction * sim.target_speed[slot] - speed)
+            desired = self.speed_fraction * sim.target_speed[slot]
+            if self.approach_speed_mps is not None:
+                zones = self._yield_zones(slot, route_rank)
+                upcoming = zones[zones >= s_front]
+                if len(upcoming):
+                    room = max(float(upcoming.min()) - STOP_MARGIN_M - s_front, 0.0)
+                    desired = min(desired, math.sqrt(self.approach_speed_mps ** 2 + 2.0 * APPROACH_DECELERATION * room))
+            acceleration = SPEED_GAIN * (desired - speed)
             patient = self._standing_s[slot] < PATIENCE_S
             for b, other in enumerate(idx.tolist()):
                 if not (higher[a, b] and patient):
@@ -98,6 +122,16 @@ class ScriptedDriver:
         np.clip(actions[:, 0], -MAX_ACCELERATION, MAX_ACCELERATION, out=actions[:, 0])
         np.clip(actions[:, 1], -MAX_STEERING, MAX_STEERING, out=actions[:, 1])
         return actions
+
+    def _yield_zones(self, slot: int, route_rank: np.ndarray) -> np.ndarray:
+        """Arc lengths [m] on ``slot``'s route where its conflict zones begin with the routes that
+        would have priority over it (``route_rank``: each route's sign rank now), car or no car."""
+        sim, table = self.sim, self.sim.priority
+        route = sim.route[slot]
+        rank = SIGN_RANK[sim.sign[slot]]
+        by_rule = (route_rank > rank) | ((route_rank == rank) & table.right_wins[route])
+        may_yield = table.conflict[route] & by_rule & (self._entry_lane != self._entry_lane[route])
+        return table.zone_start[route][may_yield]
 
     def _in_sight(self, idx: np.ndarray) -> np.ndarray:
         """``out[a, b]``: car ``idx[b]``'s centre lies in the square of half-side ``sight_m`` around

@@ -50,14 +50,20 @@ def test_table1_scripted_end_to_end(tmp_path):
 
 
 def test_table1_scripted_with_the_views_sight(tmp_path):
-    result = crossway("evaluate", "table1", "--scripted", "--scripted-sight", "view", "--scenario", "easy",
-                      "--episodes", "3", "--workers", "1", "--out", str(tmp_path))
+    result = crossway("evaluate", "table1", "--scripted", "--scripted-sight", "view", "--scripted-approach-speed",
+                      "3", "--scenario", "easy", "--episodes", "3", "--workers", "1", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
     report = json.loads((tmp_path / "table1-easy.json").read_text())
     assert report["meta"]["scripted_sight_m"] == 25.0  # half the 50 m view
-    refused = crossway("evaluate", "table1", "--checkpoint", str(tmp_path / "x.pt"), "--scripted-sight", "view",
-                       "--out", str(tmp_path / "never"))
-    assert refused.returncode == 2 and "--scripted-sight goes with --scripted" in refused.stderr
+    assert report["meta"]["scripted_approach_mps"] == 3.0
+    for option in (["--scripted-sight", "view"], ["--scripted-approach-speed", "3"]):
+        refused = crossway("evaluate", "table1", "--checkpoint", str(tmp_path / "x.pt"), *option,
+                           "--out", str(tmp_path / "never"))
+        assert refused.returncode == 2 and "go with --scripted, not with --checkpoint" in refused.stderr
+    negative = crossway("evaluate", "table1", "--scripted", "--scripted-approach-speed", "-1", "--out",
+                        str(tmp_path / "never"))
+    assert negative.returncode == 2 and "must be >= 0 m/s" in negative.stderr
+    assert not (tmp_path / "never").exists()
 
 
 def test_table1_with_a_checkpoint_and_a_refused_one(tmp_path):

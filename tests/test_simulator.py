@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from conftest import empty_simulator, place, route_index, still
-from simcore.controller import ScriptedDriver
-from simcore.dynamics import MAX_STEERING, WHEELBASE
+from simcore.controller import APPROACH_DECELERATION, SPEED_GAIN, STOP_MARGIN_M, ScriptedDriver
+from simcore.dynamics import MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
 from simcore.rewards import EndReason
 from simcore.simulator import SimConfig, Simulator
 
@@ -252,3 +252,26 @@ def test_a_teacher_with_the_views_sight_yields_only_to_cars_it_could_see(
     assert view == (full if view_sight_yields else cruise)
     with pytest.raises(ValueError, match="sight_m"):
         ScriptedDriver(sim, sight_m=0.0)
+
+
+def test_a_cautious_teacher_slows_before_a_zone_shared_with_a_route_that_may_have_priority(medium_road):
+    sim = medium_road
+    south_route, east_route = route_index(sim, "south_0", "straight"), route_index(sim, "east_0", "straight")
+    zone_south = sim.priority.zone_start[south_route, east_route]
+    room_m = 5.0  # from the car's front to the stop point, STOP_MARGIN_M before the zone
+    s = zone_south - STOP_MARGIN_M - room_m - 0.5 * VEHICLE_LENGTH
+    sim.branch_signs[:] = 0  # no sign on any arm: priority to the right alone
+    south = place(sim, "south_0", "straight", s=s, sign=0, speed=8.0)  # the road is empty
+    plain = ScriptedDriver(sim).act()[south, 0]
+    approach_mps = 3.0
+    cautious = ScriptedDriver(sim, approach_speed_mps=approach_mps).act()[south, 0]
+    # the speed it aims at here: brake from it at APPROACH_DECELERATION to reach the stop point at 3 m/s
+    aimed = math.sqrt(approach_mps ** 2 + 2.0 * APPROACH_DECELERATION * room_m)
+    assert plain == pytest.approx(SPEED_GAIN * (0.9 * 8.0 - 8.0))
+    assert cautious == pytest.approx(SPEED_GAIN * (aimed - 8.0))
+    # with a stop sign on every other arm, nobody may have priority over the south car: no caution
+    others = [b for b in range(len(sim.branch_signs)) if sim.intersection.branches[b].name != "south"]
+    sim.branch_signs[others] = 2
+    assert ScriptedDriver(sim, approach_speed_mps=approach_mps).act()[south, 0] == pytest.approx(plain)
+    with pytest.raises(ValueError, match="approach_speed_mps"):
+        ScriptedDriver(sim, approach_speed_mps=-1.0)
