@@ -258,7 +258,7 @@ def test_a_cautious_teacher_slows_before_a_zone_shared_with_a_route_that_may_hav
     sim = medium_road
     south_route, east_route = route_index(sim, "south_0", "straight"), route_index(sim, "east_0", "straight")
     zone_south = sim.priority.zone_start[south_route, east_route]
-    room_m = 5.0  # from the car's front to the stop point, STOP_MARGIN_M before the zone
+    room_m = 8.0  # from the car's front to the stop point, STOP_MARGIN_M before the zone
     s = zone_south - STOP_MARGIN_M - room_m - 0.5 * VEHICLE_LENGTH
     sim.branch_signs[:] = 0  # no sign on any arm: priority to the right alone
     south = place(sim, "south_0", "straight", s=s, sign=0, speed=8.0)  # the road is empty
