@@ -289,11 +289,16 @@ class LearnerService:
         return 0
 
 
-def run_learner(config: LearnerServiceConfig) -> int:
-    """Process entry point: SIGTERM and SIGINT stop the loop and leave a checkpoint."""
+def run_learner(config: LearnerServiceConfig, stop_requested=lambda: False) -> int:
+    """Process entry point: SIGTERM and SIGINT stop the loop and leave a checkpoint.
+
+    ``stop_requested()`` True: a stop signal came while the process was still starting (caught by
+    the caller's early handler); the service then stops at once, with a checkpoint."""
     service = LearnerService(config, log=lambda text: print(text, file=sys.stderr, flush=True))
     signal.signal(signal.SIGTERM, service.stop)
     signal.signal(signal.SIGINT, service.stop)
+    if stop_requested():
+        service.stop()
     return service.run()
 
 

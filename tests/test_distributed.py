@@ -184,6 +184,20 @@ def test_train_command_smoke(tmp_path):
     assert list((run_dir / "checkpoints").glob("ckpt-*.pt"))
 
 
+def test_train_stopped_while_the_learner_is_still_starting_exits_cleanly(tmp_path):
+    # 0.6 s: the launcher sends SIGTERM while the learner process is still importing torch
+    run_dir = tmp_path / "run"
+    result = subprocess.run(
+        [sys.executable, "-m", "crossway", "train", "--scenario", "easy", "--actors", "1", "--minutes", "0.01",
+         "--run-dir", str(run_dir), "--metrics-port", "0"],
+        capture_output=True, text=True, timeout=180,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "time is up" in result.stderr and "Traceback" not in result.stderr
+    assert "learner: stopped at version 0" in result.stderr
+    assert list((run_dir / "checkpoints").glob("ckpt-*.pt"))  # the initial weights, ready to resume from
+
+
 @pytest.mark.parametrize("bad, message", [(("--actors", "0"), "--actors"),
                                           (("--noise-correlation", "1.0"), "--noise-correlation must be in [0, 1)"),
                                           (("--acceleration-cost", "-1"), "--acceleration-cost must be >= 0"),

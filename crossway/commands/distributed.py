@@ -278,10 +278,19 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _child_learner(config) -> None:
+def _child_learner(config, handlers_set) -> None:
+    # the launcher may stop the learner (SIGTERM) before it has imported torch and set its own
+    # handler, e.g. a short --minutes on a loaded machine: remember the signal, stop cleanly later.
+    # The launcher waits for ``handlers_set`` before it sends the signal.
+    import threading
+
+    early_stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: early_stop.set())
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the launcher, which sends SIGTERM
+    handlers_set.set()
     from learner.service import run_learner
 
-    sys.exit(run_learner(config))
+    sys.exit(run_learner(config, stop_requested=early_stop.is_set))
 
 
 def _child_actor(config) -> None:
@@ -321,7 +330,9 @@ def run_train_command(args) -> int:
     args.run_dir.mkdir(parents=True, exist_ok=True)  # only once every option has been checked
 
     context = multiprocessing.get_context("spawn")  # Zenoh sessions do not survive fork
-    learner = context.Process(target=_child_learner, args=(learner_cfg,), name="crossway-learner")
+    learner_handlers_set = context.Event()
+    learner = context.Process(target=_child_learner, args=(learner_cfg, learner_handlers_set),
+                              name="crossway-learner")
     learner.start()
     actors = [context.Process(target=_child_actor, args=(cfg,), name=f"crossway-actor-{i}")
               for i, cfg in enumerate(actor_cfgs)]
@@ -404,6 +415,8 @@ def run_train_command(args) -> int:
     for process in actors:
         process.join(timeout=30)
     if learner.is_alive():
+        # a learner still starting would die of SIGTERM without its checkpoint: wait for its handler
+        learner_handlers_set.wait(timeout=120)
         learner.terminate()
     learner.join(timeout=120)
     if latest is not None:
