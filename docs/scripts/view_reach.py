@@ -14,7 +14,7 @@ import sys
 import numpy as np
 
 from simcore.dynamics import VEHICLE_LENGTH
-from simcore.render import render_frame, write_animation
+from simcore.render import render_frame
 from simcore.simulator import SimConfig, Simulator
 
 
@@ -33,17 +33,22 @@ def place(sim: Simulator, lane: str, before_line_m: float, speed_mps: float, tar
     return slot
 
 
-def main(out: str = "docs/pictures/hard-view-reach.png") -> None:
+def scene() -> tuple[Simulator, object, int]:
+    """The simulator after one step of the scene, its StepResult and the ego's slot."""
     sim = Simulator("hard", SimConfig(start_all_at_reset=False, delay_min_s=1e6, delay_max_s=1e6), seed=0)
     sim.reset()
     sim.branch_signs[:] = 0  # no signs: priority to the right
     ego = place(sim, "south_1", 0.5 * VEHICLE_LENGTH, 0.0)
     place(sim, "east_1", 8.0, 8.0)
     place(sim, "west_1", 8.0, 8.0)
-    result = sim.step(np.zeros((sim.num_slots, 2)))
+    return sim, sim.step(np.zeros((sim.num_slots, 2))), ego
+
+
+def main(out: str = "docs/pictures/hard-view-reach.png") -> None:
+    sim, result, ego = scene()
     frame = render_frame(sim, result, focus_slot=ego, pixels_per_m=4.0,
                          caption="hard: the ego at its stop line; cars 8 m before theirs")
-    write_animation([frame], out.replace(".png", ".gif")) if out.endswith(".gif") else _png(frame, out)
+    _png(frame, out)
 
 
 def _png(frame: np.ndarray, out: str) -> None:

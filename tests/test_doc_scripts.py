@@ -1,0 +1,41 @@
+"""The scripts behind numbers and pictures in docs/ still run and say what the docs rely on."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_view_reach_picture_shows_no_crossing_car_in_the_egos_obstacle_view(tmp_path):
+    out = tmp_path / "reach.png"
+    result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/view_reach.py"), str(out)],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the claim of the picture, checked on the simulator itself: at its stop line the ego's
+    # obstacle view holds the ego alone, though two crossing cars are one second from their lines
+    sys.path.insert(0, str(ROOT / "docs/scripts"))
+    try:
+        import view_reach
+    finally:
+        sys.path.pop(0)
+    sim, result, ego = view_reach.scene()
+    obstacles = result.views[ego].reshape(4, 4, 84, 84)[2, -1]  # channel 2, newest frame
+    ego_only = obstacles > 0
+    assert 10 < ego_only.sum() < 60  # one car of 4.5 x 1.8 m at 0.6 m per pixel: about 25 pixels
+    rows, cols = np.nonzero(ego_only)
+    assert abs(rows.mean() - 41.5) < 3 and abs(cols.mean() - 41.5) < 3  # all of it at the centre
+    assert sim.present.sum() == 3
+
+
+def test_teacher_crashes_prints_its_counts(tmp_path):
+    result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/teacher_crashes.py"), "--episodes", "40",
+                             "--delay-max", "5"], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["episodes"] >= 40 and sum(report["end_reasons"].values()) == report["episodes"]
+    assert sum(report["priority_car_first_seen_at"].values()) == report["crashed_into_priority"]
