@@ -10,7 +10,8 @@ it goes anyway, which breaks the rare priority cycles (three arms with equal sig
 
 With ``sight_m`` set it only yields to cars with priority whose centre lies within the square
 of that half-side around it, aligned with its heading: ``VIEW_SIGHT_M`` limits it to what a
-learner's views show (``crossway pretrain --teacher-sight view``).
+learner's views show (``crossway pretrain --teacher-sight view``). ``sight_shift_m`` moves that
+square's centre ahead of the car (a what-if for views placed further forward).
 
 With ``approach_speed_mps`` set it also drives as if a car with priority could appear at any
 moment: before each conflict zone it shares with a route that would have priority over its own
@@ -43,15 +44,19 @@ class ScriptedDriver:
     """Acts for every slot of a ``Simulator``; ``act()`` returns a ``[slots, 2]`` action array."""
 
     def __init__(self, sim: Simulator, speed_fraction: float = 0.9, yield_to_priority: bool = True,
-                 sight_m: float | None = None, approach_speed_mps: float | None = None):
+                 sight_m: float | None = None, approach_speed_mps: float | None = None,
+                 sight_shift_m: float = 0.0):
         if sight_m is not None and not sight_m > 0:
             raise ValueError(f"sight_m must be > 0 m or None, got {sight_m}")
+        if not math.isfinite(sight_shift_m):
+            raise ValueError(f"sight_shift_m must be a finite number of metres, got {sight_shift_m}")
         if approach_speed_mps is not None and not approach_speed_mps >= 0:
             raise ValueError(f"approach_speed_mps must be >= 0 m/s or None, got {approach_speed_mps}")
         # speed at the stop point of a conflict zone with a route that may have priority [m/s]
         self.approach_speed_mps = approach_speed_mps
         self.sim = sim
         self.sight_m = sight_m  # half-side of the square around the car it looks into [m]; None: everywhere
+        self.sight_shift_m = sight_shift_m  # that square's centre lies this far ahead of the car's [m]
         self.speed_fraction = speed_fraction  # cruise at this fraction of the target speed
         self.yield_to_priority = yield_to_priority
         self._standing_s = np.zeros(sim.num_slots)
@@ -134,11 +139,11 @@ class ScriptedDriver:
         return table.zone_start[route][may_yield]
 
     def _in_sight(self, idx: np.ndarray) -> np.ndarray:
-        """``out[a, b]``: car ``idx[b]``'s centre lies in the square of half-side ``sight_m`` around
-        car ``idx[a]``, aligned with ``idx[a]``'s heading."""
+        """``out[a, b]``: car ``idx[b]``'s centre lies in the square of half-side ``sight_m`` centred
+        ``sight_shift_m`` ahead of car ``idx[a]``, aligned with ``idx[a]``'s heading."""
         sim = self.sim
         dx = sim.x[idx][None, :] - sim.x[idx][:, None]
         dy = sim.y[idx][None, :] - sim.y[idx][:, None]
         cos, sin = np.cos(sim.heading[idx])[:, None], np.sin(sim.heading[idx])[:, None]
         ahead, left = dx * cos + dy * sin, dy * cos - dx * sin
-        return (np.abs(ahead) <= self.sight_m) & (np.abs(left) <= self.sight_m)
+        return (np.abs(ahead - self.sight_shift_m) <= self.sight_m) & (np.abs(left) <= self.sight_m)

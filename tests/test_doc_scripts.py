@@ -39,3 +39,13 @@ def test_teacher_crashes_prints_its_counts(tmp_path):
     report = json.loads(result.stdout)
     assert report["episodes"] >= 40 and sum(report["end_reasons"].values()) == report["episodes"]
     assert sum(report["priority_car_first_seen_at"].values()) == report["crashed_into_priority"]
+
+
+def test_teacher_sight_prints_one_line_per_window():
+    result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/teacher_sight.py"), "--episodes", "3",
+                             "--scenario", "easy"], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    lines = [json.loads(line) for line in result.stdout.splitlines()]
+    assert [(l["sight_m"], l["sight_shift_m"]) for l in lines] == [
+        (25.0, 0.0), (25.0, 15.0), (35.0, 0.0), (35.0, 15.0), (50.0, 0.0), (None, 0.0)]
+    assert all(l["episodes"] >= 12 and abs(l["reach"] + l["crash"] + l["time_over"] - 1.0) < 0.002 for l in lines)

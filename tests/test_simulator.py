@@ -250,8 +250,16 @@ def test_a_teacher_with_the_views_sight_yields_only_to_cars_it_could_see(
     view = ScriptedDriver(sim, sight_m=25.0).act()[south, 0]
     assert full == -3.0 and cruise > -2.0  # the privileged teacher stops for the car either way
     assert view == (full if view_sight_yields else cruise)
+    # the same square moved 15 m ahead: the near car is still inside it (15 m ahead, 15 m right),
+    # the far one (37 m right) still outside, at either distance
+    shifted = ScriptedDriver(sim, sight_m=25.0, sight_shift_m=15.0).act()[south, 0]
+    assert shifted == view
+    # moved 45 m ahead, the square starts 20 m ahead of the car: it sees neither
+    assert ScriptedDriver(sim, sight_m=25.0, sight_shift_m=45.0).act()[south, 0] == cruise
     with pytest.raises(ValueError, match="sight_m"):
         ScriptedDriver(sim, sight_m=0.0)
+    with pytest.raises(ValueError, match="sight_shift_m"):
+        ScriptedDriver(sim, sight_m=25.0, sight_shift_m=float("nan"))
 
 
 def test_a_cautious_teacher_slows_before_a_zone_shared_with_a_route_that_may_have_priority(medium_road):
