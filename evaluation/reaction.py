@@ -35,12 +35,16 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from algo.policy import ACTION_SCALE
 from evaluation.parallel import run_parallel
 from evaluation.table1 import OUTCOMES
+
+if TYPE_CHECKING:
+    from simcore.scenario import ScenarioSpec
 
 APPROACH_WINDOW_M = 20.0  # an encounter starts this far before the shared conflict zone [m]
 GIVE_WAY_MIN_MPS2 = 0.5  # a drop in commanded acceleration this large counts as giving way [m/s^2]
@@ -54,7 +58,7 @@ FULL_SPEED_RATIO = 0.9  # a crash at this fraction of the target speed or more: 
 
 @dataclass(frozen=True)
 class ProbeSpec:
-    scenario: str
+    scenario: ScenarioSpec | str  # the spec itself: a scenario file need not exist in the worker
     delay_max_s: float
     episodes: int
     seed: int
@@ -241,7 +245,7 @@ def run_reaction(scenario: str, checkpoint: str, episodes: int, delay_max_s: flo
     load_policy(checkpoint)  # refuse a bad checkpoint before starting workers
     if not delay_max_s >= 0:
         raise ValueError(f"--delay-max must be >= 0, got {delay_max_s}")
-    chunks = [ProbeSpec(spec.name, delay_max_s, min(CHUNK_EPISODES, episodes - start), seed + start, checkpoint)
+    chunks = [ProbeSpec(spec, delay_max_s, min(CHUNK_EPISODES, episodes - start), seed + start, checkpoint)
               for start in range(0, episodes, CHUNK_EPISODES)]
     started = time.monotonic()
     parts = run_parallel(run_probe, [(c,) for c in chunks], episodes, workers, f"reaction {spec.name}")

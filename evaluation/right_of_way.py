@@ -18,11 +18,15 @@ An episode is "no infraction" when no ordered pair has one.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simcore.dynamics import VEHICLE_LENGTH
 from simcore.rightofway import PriorityTable
+
+if TYPE_CHECKING:
+    from simcore.scenario import ScenarioSpec
 
 
 @dataclass(frozen=True)
@@ -63,7 +67,8 @@ def find_infractions(table: PriorityTable, routes: np.ndarray, signs: np.ndarray
 PAPER_TABLE2 = {"easy": 0.985, "medium": 0.990, "hard": 0.863}  # "No infraction" fractions (Table II)
 
 
-def run_episodes(scenario: str, checkpoint: str | None, episodes: int, seed: int, progress=None) -> dict:
+def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes: int, seed: int,
+                 progress=None) -> dict:
     """Synchronised episodes: every lane starts at once with a random route and sign, all cars at
     the same current and target speed; an episode ends when every car has ended (paper,
     "Testing the Right of Way Rule"). Runs in a worker process."""
@@ -123,7 +128,7 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     workers = max(1, min(workers, episodes))
     shares = [episodes // workers + (i < episodes % workers) for i in range(workers)]
     started = time.monotonic()
-    jobs = [(spec.name, checkpoint, n, seed + 1000 * i) for i, n in enumerate(shares)]
+    jobs = [(spec, checkpoint, n, seed + 1000 * i) for i, n in enumerate(shares)]
     parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}")
     clean = sum(p["no_infraction"] for p in parts)
     end_reasons: dict[str, int] = {}

@@ -14,8 +14,12 @@ import time
 from collections import Counter, defaultdict
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from evaluation.parallel import run_parallel
+
+if TYPE_CHECKING:
+    from simcore.scenario import ScenarioSpec
 
 SIGNS = ("none", "yield", "stop")
 OUTCOMES = ("goal", "crash", "off_path", "time_over")
@@ -36,12 +40,12 @@ PAPER_TABLE1 = {
 
 @dataclass(frozen=True)
 class TestSpec:
-    scenario: str
+    scenario: ScenarioSpec | str  # the spec itself: a scenario file need not exist in the worker
     delay_max_s: float
     episodes: int
     seed: int
     checkpoint: str | None  # None: the scripted driver (a stand-in for tests and smoke runs)
-    scripted_sight_m: float | None = None  # the scripted driver yields only to cars this near (ScriptedDriver)
+    scripted_sight: str | None = None  # "view": the scripted driver sees only what learners see (view_sight)
     scripted_approach_mps: float | None = None  # the scripted driver's speed at a conflict zone (ScriptedDriver)
 
 
@@ -56,7 +60,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
     import torch
 
     from evaluation.policy import PolicyDriver, load_policy
-    from simcore.controller import ScriptedDriver
+    from simcore.controller import ScriptedDriver, view_sight
     from simcore.simulator import SimConfig, Simulator
 
     torch.set_num_threads(1)
@@ -67,8 +71,8 @@ def run_test(spec: TestSpec, progress=None) -> dict:
         driver = PolicyDriver(sim, load_policy(spec.checkpoint))
         act = lambda: driver.act(result)  # noqa: E731 - reads the newest result
     else:
-        act = ScriptedDriver(sim, sight_m=spec.scripted_sight_m,
-                             approach_speed_mps=spec.scripted_approach_mps).act
+        sight = view_sight(sim) if spec.scripted_sight == "view" else {}
+        act = ScriptedDriver(sim, approach_speed_mps=spec.scripted_approach_mps, **sight).act
     counts: dict[str, Counter] = defaultdict(Counter)
     speed_sum: Counter = Counter()
     done = 0
@@ -161,7 +165,7 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
 
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
-               out_dir: Path, command: str, scripted_sight_m: float | None = None,
+               out_dir: Path, command: str, scripted_sight: str | None = None,
                scripted_approach_mps: float | None = None) -> dict:
     from simcore.scenario import load_scenario
 
@@ -170,12 +174,12 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
         from evaluation.policy import load_policy
 
         load_policy(checkpoint)  # refuse a bad checkpoint before starting workers
-    tests = [TestSpec(spec.name, d, episodes, seed + i, checkpoint, scripted_sight_m, scripted_approach_mps)
+    tests = [TestSpec(spec, d, episodes, seed + i, checkpoint, scripted_sight, scripted_approach_mps)
              for i, d in enumerate(delay_schedule(spec.episodes.delay_max_s))]
     # each test runs as chunks of at most CHUNK_EPISODES episodes (own simulator, own seed), so
     # every worker stays busy to the end; the chunks do not depend on --workers
     chunks = [TestSpec(t.scenario, t.delay_max_s, min(CHUNK_EPISODES, t.episodes - start),
-                       t.seed + 1000 * (start // CHUNK_EPISODES), t.checkpoint, t.scripted_sight_m,
+                       t.seed + 1000 * (start // CHUNK_EPISODES), t.checkpoint, t.scripted_sight,
                        t.scripted_approach_mps)
               for t in tests for start in range(0, t.episodes, CHUNK_EPISODES)]
     started = time.monotonic()
@@ -184,7 +188,10 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
     table = summarise(results)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
             "delays_max_s": [t.delay_max_s for t in tests], "seed": seed, "workers": workers,
-            "scripted_sight_m": scripted_sight_m, "scripted_approach_mps": scripted_approach_mps,
+            "scripted_sight": scripted_sight, "scripted_approach_mps": scripted_approach_mps,
+            # the view square's half-side and shift [m]: what "view" limits the scripted driver to
+            "scripted_sight_m": 0.5 * spec.views.extent_m if scripted_sight == "view" else None,
+            "scripted_sight_shift_m": spec.views.shift_m if scripted_sight == "view" else None,
             "wall_s": round(time.monotonic() - started, 1), "command": command}
     paths = write_outputs(out_dir, spec.name, results, table, meta)
     return {"table": table, "paths": paths, "meta": meta}

@@ -67,7 +67,7 @@ class Pretrainer:
     """Collection and training, one round at a time; ``run_pretrain`` loops until the budget is spent."""
 
     def __init__(self, config: PretrainConfig):
-        from simcore.controller import VIEW_SIGHT_M, ScriptedDriver
+        from simcore.controller import ScriptedDriver, view_sight
         from simcore.simulator import SimConfig, Simulator
 
         if (config.minutes <= 0 or config.rounds < 0 or config.steps_per_round < 1 or config.batch_size < 1
@@ -85,7 +85,7 @@ class Pretrainer:
         self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=config.learning_rate)
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
-        self.teacher = ScriptedDriver(self.sim, sight_m=VIEW_SIGHT_M if config.teacher_sight == "view" else None)
+        self.teacher = ScriptedDriver(self.sim, **(view_sight(self.sim) if config.teacher_sight == "view" else {}))
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()

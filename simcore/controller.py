@@ -9,7 +9,7 @@ that zone or will reach it within ``YIELD_HORIZON_S``; after waiting ``PATIENCE_
 it goes anyway, which breaks the rare priority cycles (three arms with equal signs).
 
 With ``sight_m`` set it only yields to cars with priority whose centre lies within the square
-of that half-side around it, aligned with its heading: ``VIEW_SIGHT_M`` limits it to what a
+of that half-side around it, aligned with its heading: ``view_sight(sim)`` limits it to what a
 learner's views show (``crossway pretrain --teacher-sight view``). ``sight_shift_m`` moves that
 square's centre ahead of the car (a what-if for views placed further forward).
 
@@ -36,8 +36,14 @@ YIELD_HORIZON_S = 5.0  # yield to a car with priority that reaches the conflict 
 PATIENCE_S = 4.0  # after standing this long, go [s]
 FOLLOW_GAP_M = 4.0  # bumper-to-bumper gap kept behind a car on a shared lane [m]
 SPEED_GAIN = 1.5  # proportional speed control [1/s]
-VIEW_SIGHT_M = 0.5 * VIEW_EXTENT_M  # half-side of the square a learner's views show [m]
+VIEW_SIGHT_M = 0.5 * VIEW_EXTENT_M  # half-side of the square the paper's views show [m]
 APPROACH_DECELERATION = 2.0  # comfortable braking towards a conflict zone's approach speed [m/s^2]
+
+
+def view_sight(sim: Simulator) -> dict[str, float]:
+    """``ScriptedDriver`` keyword arguments that limit it to what ``sim``'s learners see (the
+    scenario's ``[views]``: ``VIEW_SIGHT_M`` centred unless the scenario changes it)."""
+    return {"sight_m": 0.5 * sim.spec.views.extent_m, "sight_shift_m": sim.spec.views.shift_m}
 
 
 class ScriptedDriver:

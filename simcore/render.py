@@ -34,7 +34,7 @@ import numpy as np
 from simcore.dynamics import box_corners
 from simcore.rightofway import SIGN_NAMES, Sign
 from simcore.scenario import road_regions
-from simcore.views import CHANNELS, VIEW_EXTENT_M, VIEW_SIZE_PX, sign_line_polygon
+from simcore.views import CHANNELS, VIEW_SIZE_PX, sign_line_polygon
 
 # colours, RGB in [0, 1]
 BACKGROUND = (0.13, 0.15, 0.13)  # off-road
@@ -185,10 +185,12 @@ def _draw_focus_route(ctx: cairo.Context, sim, slot: int) -> None:
 
 
 def _draw_focus_square(ctx: cairo.Context, sim, slot: int) -> None:
-    """The VIEW_EXTENT_M x VIEW_EXTENT_M square the focus agent perceives, turned with its heading."""
-    half = VIEW_EXTENT_M / 2.0
+    """The square the focus agent perceives (the scenario's ``views``), turned with its heading."""
+    half = sim.spec.views.extent_m / 2.0
+    shift = sim.spec.views.shift_m
     c, s = math.cos(sim.heading[slot]), math.sin(sim.heading[slot])
-    for i, (forward, left) in enumerate([(half, half), (-half, half), (-half, -half), (half, -half)]):
+    for i, (forward, left) in enumerate([(shift + half, half), (shift - half, half), (shift - half, -half),
+                                         (shift + half, -half)]):
         px = sim.x[slot] + forward * c - left * s
         py = sim.y[slot] + forward * s + left * c
         (ctx.move_to if i == 0 else ctx.line_to)(px, py)

@@ -1,9 +1,10 @@
 """Scenarios as validated data: TOML files loaded into frozen dataclasses, then built into lanes.
 
-A scenario file names the junction's branches and its episode settings (paper, sections
-"Environment" and "Training settings"); ``build_intersection`` turns it into entry lanes and
-the paths that leave them. Unknown keys, wrong types and impossible values are all collected
-and reported together, each with the name of the field (``branches[2].angle_deg: ...``).
+A scenario file names the junction's branches, its episode settings (paper, sections
+"Environment" and "Training settings") and, optionally, the agents' view square (``[views]``);
+``build_intersection`` turns it into entry lanes and the paths that leave them. Unknown keys,
+wrong types and impossible values are all collected and reported together, each with the name
+of the field (``branches[2].angle_deg: ...``).
 """
 
 from __future__ import annotations
@@ -30,6 +31,9 @@ class ScenarioError(ValueError):
         self.problems = problems
         super().__init__(f"invalid scenario {source}:\n" + "\n".join(f"  - {p}" for p in problems))
 
+    def __reduce__(self):  # picklable, so that a worker process can hand it back to its parent
+        return (ScenarioError, (self.source, self.problems))
+
 
 @dataclass(frozen=True)
 class BranchSpec:
@@ -55,6 +59,18 @@ class EpisodeSpec:
 
 
 @dataclass(frozen=True)
+class ViewSpec:
+    """The square each agent sees (paper, "Environment": 50 x 50 m around it, 84 x 84 pixels).
+
+    Not the paper's when changed: a larger square sees cars with priority earlier at a coarser
+    resolution (extent / 84 m per pixel), and a shift puts more of it ahead of the car than behind.
+    """
+
+    extent_m: float = 50.0  # side of the square [m]
+    shift_m: float = 0.0  # its centre lies this far ahead of the car's centre [m]; 0: centred
+
+
+@dataclass(frozen=True)
 class ScenarioSpec:
     """A junction and its episode settings, as read from a scenario file."""
 
@@ -69,6 +85,7 @@ class ScenarioSpec:
     corner_radius_m: float = 14.0
     approach_length_m: float = 40.0  # from an agent's start to the junction edge [m]
     exit_length_m: float = 30.0  # from the junction edge to the goal [m]
+    views: ViewSpec = ViewSpec()  # what each agent sees; the default is the paper's
 
 
 def _field_names(cls: type) -> set[str]:
@@ -143,6 +160,21 @@ def parse_scenario(data: dict[str, Any], source: str = "<mapping>") -> ScenarioS
         )
     episodes = EpisodeSpec(**episode_values)
 
+    views_data = data.get("views", {})
+    if not isinstance(views_data, dict):
+        problems.append(f"views: expected a table, got {views_data!r}")
+        views_data = {}
+    _check_keys(views_data, _field_names(ViewSpec), "views", problems)
+    view_defaults = ViewSpec()
+    view_extent = _number(views_data.get("extent_m", view_defaults.extent_m), "views.extent_m", problems, 10.0)
+    view_shift = _number(views_data.get("shift_m", view_defaults.shift_m), "views.shift_m", problems)
+    if math.isfinite(view_extent) and math.isfinite(view_shift) and abs(view_shift) > 0.5 * view_extent - 3.0:
+        problems.append(f"views.shift_m: the car must stay inside its own view, 3 m from its edge: |shift_m| "
+                        f"<= extent_m / 2 - 3 = {0.5 * view_extent - 3.0:g}, got {view_shift:g}")
+    if math.isfinite(view_extent) and view_extent > 200.0:
+        problems.append(f"views.extent_m: at most 200 m (2.4 m per pixel), got {view_extent:g}")
+    views = ViewSpec(view_extent, view_shift)
+
     raw_branches = data.get("branches")
     branches: list[BranchSpec] = []
     if not isinstance(raw_branches, list) or not 3 <= len(raw_branches) <= 4:
@@ -191,7 +223,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<mapping>") -> ScenarioS
     spec = ScenarioSpec(
         name=name, branches=tuple(branches), episodes=episodes, description=description,
         lanes_per_direction=lanes, lane_width_m=lane_width, corner_radius_m=corner,
-        approach_length_m=approach, exit_length_m=exit_length,
+        approach_length_m=approach, exit_length_m=exit_length, views=views,
     )
     # geometric checks need the built layout; they raise ScenarioError themselves
     build_intersection(spec, source=source)

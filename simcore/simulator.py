@@ -168,7 +168,9 @@ class Simulator:
         self.num_traffic = config.traffic.max_cars if config.traffic else 0  # traffic vehicles after them
         self.num_vehicles = self.num_slots + self.num_traffic
         self.priority = build_priority_table(self.intersection)
-        self.renderer = ViewRenderer(self.intersection, self.num_vehicles) if config.observe else None
+        views = self.spec.views
+        self.renderer = (ViewRenderer(self.intersection, self.num_vehicles, view_extent_m=views.extent_m,
+                                      view_shift_m=views.shift_m) if config.observe else None)
         self._route_paths = [r.path for r in self.intersection.routes]
         self._route_length = np.array([r.path.length for r in self.intersection.routes])
         self._half_width = 0.5 * self.spec.lane_width_m

@@ -1,8 +1,9 @@
 """Semantic views (paper, "Environment", Fig. 2): four 84x84 uint8 images per agent.
 
 Each agent sees the 50 x 50 m square around it, ego-centred and heading-aligned: the car's
-centre is the image centre and it points up. Channels and pixel codes (the paper's "white"
-is 255, its "black" is 128, and 0 is always "nothing here"):
+centre is the image centre and it points up. A scenario's ``[views]`` table may change the
+square's side and move its centre ahead of the car (``ViewSpec``; not the paper's). Channels
+and pixel codes (the paper's "white" is 255, its "black" is 128, and 0 is always "nothing here"):
 
 ======  ==============  =====================================================================
 index   channel         codes
@@ -130,15 +131,17 @@ class ViewRenderer:
 
     def __init__(self, intersection: Intersection, max_vehicles: int,
                  view_size_px: int = VIEW_SIZE_PX, view_extent_m: float = VIEW_EXTENT_M,
-                 supersample: int = SUPERSAMPLE):
+                 supersample: int = SUPERSAMPLE, view_shift_m: float = 0.0):
         if max_vehicles > 254:
             raise ValueError("at most 254 vehicles fit in the 8-bit label raster")
         self.intersection = intersection
         self.view_size_px = view_size_px
         self.view_extent_m = view_extent_m
+        self.view_shift_m = view_shift_m  # the square's centre lies this far ahead of the car [m]
         pixels_per_m = view_size_px / view_extent_m * supersample
-        # pad by the view's half diagonal so that every lookup from a car on the map lands inside
-        pad = view_extent_m / math.sqrt(2.0) + 1.0
+        # pad by the view's half diagonal (plus its shift) so that every lookup from a car on the
+        # map lands inside
+        pad = view_extent_m / math.sqrt(2.0) + abs(view_shift_m) + 1.0
         self._labels = WorldRaster(intersection.extent_m + pad, pixels_per_m)
         size = self._labels.size
         self.raster_size = size
@@ -169,7 +172,7 @@ class ViewRenderer:
         # view pixel centres in the ego frame: forward up the image, left to the image's left
         meters_per_px = view_extent_m / view_size_px
         centres = (view_size_px / 2.0 - np.arange(view_size_px) - 0.5) * meters_per_px
-        forward, left = np.meshgrid(centres, centres, indexing="ij")
+        forward, left = np.meshgrid(centres + view_shift_m, centres, indexing="ij")
         self._forward = forward.reshape(-1).astype(np.float32)
         self._left = left.reshape(-1).astype(np.float32)
         self.max_vehicles = max_vehicles

@@ -167,3 +167,21 @@ def test_ttc_comparison_reuses_the_sweeps_cells_at_the_chosen_threshold(tmp_path
     assert [r for r in sweep_rows if r["threshold_s"] == threshold_s] == fresh["rows"]
     other_seed = run_comparison(None, threshold_s, 4, delays, 2, 6, tmp_path / "other", "test")
     assert other_seed["rows"] != fresh["rows"]  # so the equalities above say something
+
+
+def test_evaluations_run_a_scenario_file_with_its_own_views(tmp_path):
+    """Workers get the scenario itself, not a name they would have to find: a file works."""
+    from simcore.scenario import SCENARIO_DIR
+
+    scenario = tmp_path / "easy-wide.toml"
+    scenario.write_text((SCENARIO_DIR / "easy.toml").read_text().replace('name = "easy"', 'name = "easy-wide"')
+                        + "\n[views]\nextent_m = 70.0\nshift_m = 15.0\n")
+    table1 = crossway("evaluate", "table1", "--scripted", "--scripted-sight", "view", "--scenario", str(scenario),
+                      "--episodes", "2", "--workers", "2", "--out", str(tmp_path / "t1"))
+    assert table1.returncode == 0, table1.stderr
+    meta = json.loads((tmp_path / "t1" / "table1-easy-wide.json").read_text())["meta"]
+    assert (meta["scenario"], meta["scripted_sight_m"], meta["scripted_sight_shift_m"]) == ("easy-wide", 35.0, 15.0)
+    rules = crossway("evaluate", "right-of-way", "--scripted", "--scenario", str(scenario), "--episodes", "2",
+                     "--workers", "2", "--out", str(tmp_path / "row"))
+    assert rules.returncode == 0, rules.stderr
+    assert (tmp_path / "row" / "right-of-way-easy-wide.csv").exists()

@@ -6,6 +6,7 @@ import pytest
 
 from simcore.scenario import (
     ScenarioError,
+    ViewSpec,
     build_intersection,
     classify_turn,
     load_scenario,
@@ -183,6 +184,17 @@ def test_custom_file_loads(tmp_path):
     (lambda t: t.replace("lanes_per_direction = 1", "lanes_per_direction = 1.5"), "lanes_per_direction: expected an integer"),
     (lambda t: t.replace('name = "custom"', 'name = "custom"\n[extra'), "not valid TOML"),
     (lambda t: t.replace('name = "custom"', 'name = ""'), "name: expected a non-empty string"),
+    (lambda t: t.replace("[episodes]", "[views]\nextent_m = 5.0\n[episodes]"),
+     "views.extent_m: must be >= 10"),
+    (lambda t: t.replace("[episodes]", "[views]\nextent_m = 300.0\n[episodes]"),
+     "views.extent_m: at most 200 m"),
+    (lambda t: t.replace("[episodes]", "[views]\nshift_m = 23.0\n[episodes]"),
+     "views.shift_m: the car must stay inside its own view"),
+    (lambda t: t.replace("[episodes]", "[views]\nshift_m = 'ahead'\n[episodes]"),
+     "views.shift_m: expected a finite number"),
+    (lambda t: t.replace("[episodes]", "[views]\nwidth_m = 60.0\n[episodes]"),
+     "views.width_m: unknown field"),
+    (lambda t: t.replace('name = "custom"', 'name = "custom"\nviews = 70'), "views: expected a table"),
 ])
 def test_bad_files_name_the_field(tmp_path, edit, field):
     file = tmp_path / "bad.toml"
@@ -192,6 +204,21 @@ def test_bad_files_name_the_field(tmp_path, edit, field):
     assert field in str(caught.value)
     assert str(file) in str(caught.value)
     assert isinstance(caught.value, ValueError)
+
+
+def test_a_scenario_error_survives_pickling():  # a worker process hands it back to its parent
+    import pickle
+
+    error = pickle.loads(pickle.dumps(ScenarioError("bad.toml", ["views.extent_m: must be >= 10"])))
+    assert isinstance(error, ScenarioError) and error.problems == ["views.extent_m: must be >= 10"]
+    assert "bad.toml" in str(error)
+
+
+def test_views_default_to_the_papers_and_a_file_may_change_them(tmp_path):
+    file = tmp_path / "wide.toml"
+    file.write_text(GOOD.replace("[episodes]", "[views]\nextent_m = 70.0\nshift_m = 15.0\n[episodes]"))
+    assert load_scenario(file).views == ViewSpec(extent_m=70.0, shift_m=15.0)
+    assert load_scenario("hard").views == ViewSpec(extent_m=50.0, shift_m=0.0)  # the paper's, centred
 
 
 def test_two_arms_in_the_same_turn_direction_are_refused():

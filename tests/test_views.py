@@ -187,3 +187,39 @@ def test_history_holds_four_frames_oldest_first():
     assert not np.array_equal(frames[0], frames[3])
     assert np.array_equal(frames[0], first)  # the oldest kept frame is the one seen 3 steps ago
     assert (frames[3] == PATH).sum() > (frames[0] == PATH).sum()  # more route behind the car now
+
+
+def test_a_scenarios_views_table_widens_and_shifts_the_square():
+    """70 m at 84 px (0.83 m per pixel), centred 15 m ahead: the ego sits 18 px below the image
+    centre, and a car 40 m straight ahead, beyond the paper's 25 m, comes into view 12 px from the top."""
+    from dataclasses import replace
+
+    from conftest import EMPTY_ROAD
+    from simcore.controller import view_sight
+    from simcore.scenario import ViewSpec, load_scenario
+
+    def obstacles_of_the_ego(spec):
+        sim = Simulator(spec, EMPTY_ROAD, seed=0)
+        sim.reset()
+        ego = place(sim, "south_1", "straight", s=10.0, sign=0, speed=5.0)
+        other = place(sim, "north_1", "straight", s=10.0, sign=0, speed=5.0)
+        # move the other car 40 m straight ahead of the ego, on its axis, facing it
+        h = sim.heading[ego]
+        sim.x[other], sim.y[other] = sim.x[ego] + 40.0 * np.cos(h), sim.y[ego] + 40.0 * np.sin(h)
+        sim.heading[other] = h + np.pi
+        result = sim.step(still(sim))
+        return sim, result.views[ego].reshape(4, 4, 84, 84)[2, -1]
+
+    def centre_row(mask):
+        return np.nonzero(mask)[0].mean()
+
+    hard = load_scenario("hard")
+    _, paper = obstacles_of_the_ego(hard)
+    assert abs(centre_row(paper > 0) - 41.5) < 1.5  # the ego alone, at the centre
+    sim, shifted = obstacles_of_the_ego(replace(hard, views=ViewSpec(extent_m=70.0, shift_m=15.0)))
+    metres_per_px = 70.0 / 84.0
+    top, bottom = shifted[:42] > 0, shifted[42:] > 0
+    assert abs(42 + centre_row(bottom) - (41.5 + 15.0 / metres_per_px)) < 1.5  # the ego, 18 px down
+    assert abs(centre_row(top) - (41.5 - (40.0 - 15.0) / metres_per_px)) < 1.5  # the other car, row 11.5
+    assert 4 <= top.sum() <= 15  # 4.5 x 1.8 m at 0.83 m per pixel: about 5 x 2 px
+    assert view_sight(sim) == {"sight_m": 35.0, "sight_shift_m": 15.0}

@@ -26,8 +26,8 @@ def add_parser(subparsers) -> None:
     _add_policy_options(table1, scripted=True, scenario=True)
     table1.add_argument("--scripted-sight", choices=("full", "view"), default=None,
                         help="with --scripted: full (default) yields to every car with priority; view only to those "
-                             "inside the 50 x 50 m a learner's views show (the teacher of 'crossway pretrain "
-                             "--teacher-sight view')")
+                             "inside the square a learner's views show (50 x 50 m around it unless the scenario's "
+                             "[views] say otherwise; the teacher of 'crossway pretrain --teacher-sight view')")
     table1.add_argument("--scripted-approach-speed", type=float, default=None, metavar="M_PER_S",
                         help="with --scripted: slow to this speed [m/s] before every conflict zone shared with a "
                              "route that would have priority, whether or not a car is there (the teacher of "
@@ -123,11 +123,8 @@ def run_table1_command(args) -> int:
         raise ValueError("--scripted-sight and --scripted-approach-speed go with --scripted, not with --checkpoint")
     if args.scripted_approach_speed is not None and not args.scripted_approach_speed >= 0:
         raise ValueError(f"--scripted-approach-speed must be >= 0 m/s, got {args.scripted_approach_speed}")
-    from simcore.controller import VIEW_SIGHT_M
-
-    sight = VIEW_SIGHT_M if args.scripted_sight == "view" else None
     report = run_table1(args.scenario, checkpoint, args.episodes, args.workers, args.seed, args.out,
-                        _command_line(), scripted_sight_m=sight,
+                        _command_line(), scripted_sight=args.scripted_sight if args.scripted_sight == "view" else None,
                         scripted_approach_mps=args.scripted_approach_speed)
     print(markdown(report["meta"]["scenario"], report["table"]), end="")
     print("wrote " + ", ".join(str(p) for p in report["paths"]) + f" in {report['meta']['wall_s']} s")
