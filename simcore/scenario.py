@@ -109,6 +109,16 @@ def _check_keys(data: dict, allowed: set[str], where: str, problems: list[str]) 
         problems.append(f"{prefix}{key}: unknown field (allowed: {', '.join(sorted(allowed))})")
 
 
+def _sub_table(data: dict, key: str, spec: type, problems: list[str]) -> dict:
+    """``data[key]`` (a table whose fields are ``spec``'s; empty when absent), its problems noted."""
+    table = data.get(key, {})
+    if not isinstance(table, dict):
+        problems.append(f"{key}: expected a table, got {table!r}")
+        return {}
+    _check_keys(table, _field_names(spec), key, problems)
+    return table
+
+
 def parse_scenario(data: dict[str, Any], source: str = "<mapping>") -> ScenarioSpec:
     """Validate a decoded scenario mapping; raise ``ScenarioError`` listing every problem."""
     problems: list[str] = []
@@ -140,11 +150,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<mapping>") -> ScenarioS
     approach = _number(data.get("approach_length_m", 40.0), "approach_length_m", problems, 10.0)
     exit_length = _number(data.get("exit_length_m", 30.0), "exit_length_m", problems, 10.0)
 
-    episodes_data = data.get("episodes", {})
-    if not isinstance(episodes_data, dict):
-        problems.append(f"episodes: expected a table, got {episodes_data!r}")
-        episodes_data = {}
-    _check_keys(episodes_data, _field_names(EpisodeSpec), "episodes", problems)
+    episodes_data = _sub_table(data, "episodes", EpisodeSpec, problems)
     defaults = EpisodeSpec()
     episode_values = {
         f.name: _number(episodes_data.get(f.name, getattr(defaults, f.name)), f"episodes.{f.name}",
@@ -160,11 +166,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<mapping>") -> ScenarioS
         )
     episodes = EpisodeSpec(**episode_values)
 
-    views_data = data.get("views", {})
-    if not isinstance(views_data, dict):
-        problems.append(f"views: expected a table, got {views_data!r}")
-        views_data = {}
-    _check_keys(views_data, _field_names(ViewSpec), "views", problems)
+    views_data = _sub_table(data, "views", ViewSpec, problems)
     view_defaults = ViewSpec()
     view_extent = _number(views_data.get("extent_m", view_defaults.extent_m), "views.extent_m", problems, 10.0)
     view_shift = _number(views_data.get("shift_m", view_defaults.shift_m), "views.shift_m", problems)
