@@ -135,15 +135,25 @@ class DemonstrationBuffer:
                 "returns": self.returns[rows], "value_known": self.value_known[rows]}
 
 
-def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: float) -> tuple[torch.Tensor, dict]:
+# a teacher label at or below this (normalised units: -1.5 m/s^2) is a hard braking decision
+BRAKE_LABEL = -0.5
+
+
+def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: float,
+                   brake_weight: float = 1.0) -> tuple[torch.Tensor, dict]:
     """Mean squared error of both means against the teacher's actions (normalised units), plus
-    ``value_coef`` times that of both values against the discounted returns where they are known."""
+    ``value_coef`` times that of both values against the discounted returns where they are known.
+
+    ``brake_weight`` > 1 counts each sample whose acceleration label is a hard braking decision
+    (``BRAKE_LABEL``) that many times in the acceleration error's weighted mean: those samples are
+    few (7% of car-steps on hard) and decide the crashes."""
     views, scalars = preprocess(batch["views"], batch["scalars"])
     mu_acc, v_acc, mu_sa, v_sa = policy(views, scalars)
     targets = torch.from_numpy(batch["targets"])
     returns = torch.from_numpy(batch["returns"])
     known = torch.from_numpy(batch["value_known"]).float()
-    action_loss_acc = ((mu_acc - targets[:, 0]) ** 2).mean()
+    weights = torch.where(targets[:, 0] <= BRAKE_LABEL, brake_weight, 1.0)
+    action_loss_acc = (weights * (mu_acc - targets[:, 0]) ** 2).sum() / weights.sum()
     action_loss_sa = ((mu_sa - targets[:, 1]) ** 2).mean()
     count = known.sum().clamp(min=1.0)
     value_loss_acc = (known * (v_acc - returns[:, 0]) ** 2).sum() / count

@@ -45,6 +45,7 @@ class PretrainConfig:
     # "full": the teacher yields to every car with priority; "view": only to those its views show
     teacher_sight: str = "full"
     teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
+    brake_weight: float = 1.0  # weight of the teacher's hard-braking labels in the action loss (imitation_loss)
     buffer_samples: int = 40_000  # replay capacity, 28 KB per sample
     delay_max_s: float | None = None  # waits between a lane's episodes (None: the scenario's)
     seed: int = 0
@@ -77,6 +78,8 @@ class Pretrainer:
             raise ValueError(f"teacher_sight must be one of {TEACHER_SIGHTS}, got {config.teacher_sight!r}")
         if not config.teacher_half_life > 0:
             raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
+        if not config.brake_weight > 0:
+            raise ValueError(f"brake_weight must be > 0, got {config.brake_weight}")
         self.config = config
         torch.manual_seed(config.seed)
         torch.set_num_threads(config.torch_threads)
@@ -143,7 +146,7 @@ class Pretrainer:
         totals: dict[str, float] = {}
         for _ in range(updates):
             batch = self.buffer.batch(self.buffer.sample_indices(self.config.batch_size, self.rng))
-            loss, metrics = imitation_loss(self.policy, batch, self.config.value_coef)
+            loss, metrics = imitation_loss(self.policy, batch, self.config.value_coef, self.config.brake_weight)
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(self.policy.parameters(), 40.0)

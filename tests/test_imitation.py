@@ -87,6 +87,28 @@ def test_imitation_loss_is_zero_where_the_network_already_agrees_and_ignores_unk
     assert metrics["value_loss_acc"] == pytest.approx(float(((v_acc - 123.0) ** 2).mean()), rel=1e-5)
 
 
+def test_brake_weight_counts_hard_braking_labels_that_many_times():
+    torch.manual_seed(0)
+    policy = Policy()
+    buffer = DemonstrationBuffer(capacity=20, gamma=0.9)
+    buffer.add(episode(4, first_value=0), terminal=False)
+    batch = buffer.batch(np.arange(4))
+    from algo.policy import preprocess
+
+    with torch.no_grad():
+        mu_acc, _, mu_sa, _ = policy(*preprocess(batch["views"], batch["scalars"]))
+    # two hard braking labels (<= -0.5) and two others; the steering labels are the means themselves
+    labels = np.array([-0.6, -0.9, 0.2, -0.4], np.float32)
+    batch["targets"] = np.stack([labels, mu_sa.numpy()], 1).astype(np.float32)
+    errors = labels - mu_acc.numpy()
+    _, plain = imitation_loss(policy, batch, value_coef=0.0)
+    _, weighted = imitation_loss(policy, batch, value_coef=0.0, brake_weight=5.0)
+    squared = errors.astype(np.float64) ** 2
+    assert plain["action_loss_acc"] == pytest.approx(squared.mean(), rel=1e-5)
+    by_hand = (5.0 * squared[:2].sum() + squared[2:].sum()) / (5.0 * 2 + 2)
+    assert weighted["action_loss_acc"] == pytest.approx(by_hand, rel=1e-5)
+
+
 def test_training_on_the_teachers_labels_brings_the_network_towards_them():
     from learner.pretrain import PretrainConfig, Pretrainer
 
@@ -131,6 +153,7 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
     (["--rounds", "-1"], "--rounds"),
     (["--teacher-half-life", "0"], "--teacher-half-life"),
     (["--gamma", "1.5"], "--gamma"),
+    (["--brake-weight", "0"], "--brake-weight must be > 0"),
 ])
 def test_pretrain_refuses_bad_input(tmp_path, args, message):
     result = crossway("pretrain", "--out", str(tmp_path / "never"), *args)
