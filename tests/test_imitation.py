@@ -67,16 +67,21 @@ def test_a_full_buffer_forgets_the_oldest_samples_and_never_samples_a_broken_his
         DemonstrationBuffer(capacity=0, gamma=0.9)
 
 
-def test_imitation_loss_is_zero_where_the_network_already_agrees_and_ignores_unknown_values():
+def _a_network_and_its_outputs_on_four_samples():
+    """A seeded random network, a batch of 4 samples and its (mu_acc, v_acc, mu_sa, v_sa) on them."""
+    from algo.policy import preprocess
+
     torch.manual_seed(0)
     policy = Policy()
     buffer = DemonstrationBuffer(capacity=20, gamma=0.9)
     buffer.add(episode(4, first_value=0), terminal=False)
     batch = buffer.batch(np.arange(4))
-    from algo.policy import preprocess
-
     with torch.no_grad():
-        mu_acc, v_acc, mu_sa, v_sa = policy(*preprocess(batch["views"], batch["scalars"]))
+        return policy, batch, policy(*preprocess(batch["views"], batch["scalars"]))
+
+
+def test_imitation_loss_is_zero_where_the_network_already_agrees_and_ignores_unknown_values():
+    policy, batch, (mu_acc, v_acc, mu_sa, v_sa) = _a_network_and_its_outputs_on_four_samples()
     batch["targets"] = torch.stack([mu_acc, mu_sa], 1).numpy()
     batch["returns"][:] = 123.0  # far off, but unknown: must not count
     loss, metrics = imitation_loss(policy, batch, value_coef=1.0)
@@ -88,15 +93,7 @@ def test_imitation_loss_is_zero_where_the_network_already_agrees_and_ignores_unk
 
 
 def test_brake_weight_counts_hard_braking_labels_that_many_times():
-    torch.manual_seed(0)
-    policy = Policy()
-    buffer = DemonstrationBuffer(capacity=20, gamma=0.9)
-    buffer.add(episode(4, first_value=0), terminal=False)
-    batch = buffer.batch(np.arange(4))
-    from algo.policy import preprocess
-
-    with torch.no_grad():
-        mu_acc, _, mu_sa, _ = policy(*preprocess(batch["views"], batch["scalars"]))
+    policy, batch, (mu_acc, _, mu_sa, _) = _a_network_and_its_outputs_on_four_samples()
     # two hard braking labels (<= -0.5) and two others; the steering labels are the means themselves
     labels = np.array([-0.6, -0.9, 0.2, -0.4], np.float32)
     batch["targets"] = np.stack([labels, mu_sa.numpy()], 1).astype(np.float32)
