@@ -61,7 +61,8 @@ def main() -> None:
             "car_steps": int(mask.sum()),
             "teacher_mean_mps2": round(float(teacher_acc[mask].mean()), 3) if mask.any() else None,
             "student_mean_mps2": round(float(student_acc[mask].mean()), 3) if mask.any() else None,
-            "student_brakes_hard": round(float((student_acc[mask] <= HARD_BRAKE_MPS2).mean()), 3) if mask.any() else None,
+            "student_brakes_hard": (round(float((student_acc[mask] <= HARD_BRAKE_MPS2).mean()), 3)
+                                    if mask.any() else None),
         }
     print(json.dumps(report))
 
