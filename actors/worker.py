@@ -22,7 +22,7 @@ import torch
 import zenoh
 
 from algo.d_a3c import ActorCore, DA3CConfig, FinishedEpisode
-from algo.policy import PolicyConfig, parameter_shapes
+from algo.policy import PolicyConfig, ViewMismatch, describe_views, parameter_shapes, same_views
 from protocol import keys
 from protocol.messages import ActorHello, DecodeError, EpisodeStats, GradientPush, Weights, check_shapes, decode, encode
 from protocol.transport import TransportConfig, open_session
@@ -30,6 +30,7 @@ from simcore.simulator import SimConfig, Simulator
 
 HEARTBEAT_S = 5.0
 WEIGHTS_QUERY_TIMEOUT_S = 5.0
+EXIT_VIEWS_MISMATCH = 3  # the learner's run learns from another view square than this actor's scenario
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,8 @@ class ActorService:
         self.sim = Simulator(config.scenario, config.sim, seed=config.seed)
         self.core = ActorCore(self.sim, config.policy, config.da3c, seed=config.seed)
         self.shapes = parameter_shapes(self.core.global_policy)
+        views = self.sim.spec.views
+        self.views = (views.extent_m, views.shift_m)  # [m] reported with every push
         self._latest_weights: bytes | None = None
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -79,6 +82,11 @@ class ActorService:
         except DecodeError as error:
             self.log(f"actor {self.actor_id}: ignored bad weights ({error})")
             return False
+        if weights.view_extent_m > 0 and not same_views((weights.view_extent_m, weights.view_shift_m), self.views):
+            raise ViewMismatch(
+                f"the learner's run learns from {describe_views((weights.view_extent_m, weights.view_shift_m))}, "
+                f"but scenario {self.sim.spec.name!r} shows {describe_views(self.views)}: start this actor on a "
+                f"scenario with the run's [views], or a new run (another --run-name) for these views")
         if weights.version != self.core.version:
             if weights.version < self.core.version:
                 self.log(f"actor {self.actor_id}: learner went back to version {weights.version} (restart)")
@@ -101,7 +109,8 @@ class ActorService:
         message = GradientPush(actor_id=self.actor_id, base_version=episode.base_version,
                                agent_steps=episode.agent_steps, tensors=episode.gradients, episodes=(stats,),
                                loss_policy_acc=float(losses[0]), loss_policy_sa=float(losses[1]),
-                               loss_value_acc=float(losses[2]), loss_value_sa=float(losses[3]))
+                               loss_value_acc=float(losses[2]), loss_value_sa=float(losses[3]),
+                               view_extent_m=self.views[0], view_shift_m=self.views[1])
         session.put(keys.gradients(self.config.run_name), encode(message),
                     congestion_control=zenoh.CongestionControl.BLOCK)
         self.pushes += 1
@@ -111,6 +120,14 @@ class ActorService:
                           pid=os.getpid(), agent_steps=self.core.agent_steps, episodes=self.episodes)
 
     def run(self) -> int:
+        """Drive until stopped; 0, or ``EXIT_VIEWS_MISMATCH`` when the run's views are not this actor's."""
+        try:
+            return self._run()
+        except ViewMismatch as error:
+            self.log(f"actor {self.actor_id}: stopping: {error}")
+            return EXIT_VIEWS_MISMATCH
+
+    def _run(self) -> int:
         cfg = self.config
         run = cfg.run_name
         with open_session(cfg.transport) as session:

@@ -25,10 +25,14 @@ import torch
 from torch import nn
 
 from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING
+from simcore.views import VIEW_EXTENT_M
 
 VIEW_SHAPE = (16, 84, 84)
 SPEED_SCALE = 10.0  # speeds are divided by this before entering the network [m/s]
 ACTION_SCALE = np.array([MAX_ACCELERATION, MAX_STEERING], dtype=np.float32)  # [m/s^2, rad]
+# the view square (side, centre ahead of the car) [m] of a file that does not record one: every
+# file written before checkpoints recorded it learnt from the paper's views
+PAPER_VIEWS = (VIEW_EXTENT_M, 0.0)
 
 
 @dataclass(frozen=True)
@@ -116,3 +120,41 @@ def load_policy(checkpoint: str | Path) -> Policy:
         raise ValueError(f"{path}: its weights do not match the network {config} ({str(error)[:200]})") from None
     policy.eval()
     return policy
+
+
+def views_record(extent_m: float, shift_m: float) -> dict[str, float]:
+    """The ``views`` entry of a checkpoint: the view square its weights learnt from [m]."""
+    return {"extent_m": float(extent_m), "shift_m": float(shift_m)}
+
+
+def policy_views(checkpoint: str | Path) -> tuple[float, float] | None:
+    """(side, centre ahead of the car) [m] of the view square a checkpoint's weights learnt from:
+    ``PAPER_VIEWS`` for a file that does not record one, None for a learner checkpoint written
+    before any actor reported its views (the weights have not learnt from any yet)."""
+    state = torch.load(Path(checkpoint), weights_only=False, map_location="cpu")
+    if not isinstance(state, dict) or "views" not in state:
+        return PAPER_VIEWS
+    views = state["views"]
+    return None if views is None else (float(views["extent_m"]), float(views["shift_m"]))
+
+
+class ViewMismatch(ValueError):
+    """Weights meet inputs drawn through another view square than the one they learnt from."""
+
+
+def same_views(a: tuple[float, float], b: tuple[float, float]) -> bool:
+    """Two view squares are the same to a millimetre."""
+    return abs(a[0] - b[0]) < 1e-3 and abs(a[1] - b[1]) < 1e-3
+
+
+def describe_views(views: tuple[float, float]) -> str:
+    return f"views {views[0]:g} m wide, centred {views[1]:g} m ahead of the car"
+
+
+def require_views(checkpoint: str | Path, shown: tuple[float, float], scenario: str, advice: str) -> None:
+    """Raise ``ViewMismatch`` (ending with ``advice``) when the checkpoint's weights learnt from
+    another view square than ``shown``, the one scenario ``scenario``'s agents see."""
+    learnt = policy_views(checkpoint)
+    if learnt is not None and not same_views(learnt, shown):
+        raise ViewMismatch(f"{checkpoint} learnt from {describe_views(learnt)}, but scenario {scenario!r} shows "
+                           f"{describe_views(shown)}: {advice}")

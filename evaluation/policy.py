@@ -11,8 +11,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from algo.policy import ACTION_SCALE, Policy, load_policy
+from algo.policy import ACTION_SCALE, Policy, load_policy, require_views
 from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
+
+
+def check_checkpoint(checkpoint: str | Path, spec) -> None:
+    """Refuse, before any worker starts, a checkpoint that does not load or whose weights learnt
+    from another view square than the one the agents of scenario ``spec`` see: the same pixels
+    would then show the junction at another scale or place, and its numbers would mean nothing."""
+    load_policy(checkpoint)
+    require_views(checkpoint, (spec.views.extent_m, spec.views.shift_m), spec.name,
+                  "evaluate it on a scenario file whose [views] table matches (docs/simulator.md)")
 
 
 def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Path:
@@ -20,9 +29,12 @@ def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Pa
     policy = load_policy(checkpoint)
     state = torch.load(Path(checkpoint), weights_only=False, map_location="cpu")
     out = Path(out)
-    torch.save({"policy": policy.state_dict(), "policy_config": state["policy_config"],
+    exported = {"policy": policy.state_dict(), "policy_config": state["policy_config"],
                 "version": state.get("version"), "agent_steps": state.get("agent_steps"),
-                "run_id": state.get("run_id"), "note": note}, out)
+                "run_id": state.get("run_id"), "note": note}
+    if "views" in state:  # a file without the record reads as the paper's views (algo.policy.policy_views)
+        exported["views"] = state["views"]
+    torch.save(exported, out)
     return out
 
 

@@ -238,11 +238,11 @@ def markdown(summary: dict) -> str:
 
 def run_reaction(scenario: str, checkpoint: str, episodes: int, delay_max_s: float, workers: int, seed: int,
                  out_dir: Path, command: str) -> dict:
-    from evaluation.policy import load_policy
+    from evaluation.policy import check_checkpoint
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
-    load_policy(checkpoint)  # refuse a bad checkpoint before starting workers
+    check_checkpoint(checkpoint, spec)  # refuse a bad checkpoint before starting workers
     if not delay_max_s >= 0:
         raise ValueError(f"--delay-max must be >= 0, got {delay_max_s}")
     chunks = [ProbeSpec(spec, delay_max_s, min(CHUNK_EPISODES, episodes - start), seed + start, checkpoint)

@@ -122,9 +122,9 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
 
     spec = load_scenario(scenario)
     if checkpoint is not None:
-        from evaluation.policy import load_policy
+        from evaluation.policy import check_checkpoint
 
-        load_policy(checkpoint)
+        check_checkpoint(checkpoint, spec)
     workers = max(1, min(workers, episodes))
     shares = [episodes // workers + (i < episodes % workers) for i in range(workers)]
     started = time.monotonic()

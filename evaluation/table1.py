@@ -171,9 +171,9 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
 
     spec = load_scenario(scenario)
     if checkpoint is not None:
-        from evaluation.policy import load_policy
+        from evaluation.policy import check_checkpoint
 
-        load_policy(checkpoint)  # refuse a bad checkpoint before starting workers
+        check_checkpoint(checkpoint, spec)  # refuse a bad checkpoint before starting workers
     tests = [TestSpec(spec, d, episodes, seed + i, checkpoint, scripted_sight, scripted_approach_mps)
              for i, d in enumerate(delay_schedule(spec.episodes.delay_max_s))]
     # each test runs as chunks of at most CHUNK_EPISODES episodes (own simulator, own seed), so

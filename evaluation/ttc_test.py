@@ -120,9 +120,10 @@ def run_comparison(checkpoint: str | None, threshold_s: float, episodes: int, de
     taken as they are instead of being driven again."""
     drivers = ["ttc"] + (["policy"] if checkpoint is not None else [])
     if checkpoint is not None:
-        from evaluation.policy import load_policy
+        from evaluation.policy import check_checkpoint
+        from simcore.scenario import load_scenario
 
-        load_policy(checkpoint)
+        check_checkpoint(checkpoint, load_scenario("hard"))  # the TTC test drives the built-in hard junction
     tests = [TTCTest(driver, level, d, episodes, cell_seed(seed, j, i), threshold_s, checkpoint)
              for driver in drivers
              for j, level in enumerate(TRAFFIC_LEVELS) for i, d in enumerate(delays)]

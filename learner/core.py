@@ -11,7 +11,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from algo.policy import Policy, PolicyConfig, parameter_shapes, sigma_at
+from algo.policy import (Policy, PolicyConfig, ViewMismatch, describe_views, parameter_shapes, same_views, sigma_at,
+                         views_record)
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,9 @@ class LearnerCore:
         self.version = 0
         self.agent_steps = 0  # agent-steps behind every applied gradient: drives the sigma schedule
         self.shapes = parameter_shapes(self.policy)
+        # the view square (side, centre ahead of the car) [m] the weights learn from: fixed by the
+        # first push that says it, kept in checkpoints; None until then
+        self.views: tuple[float, float] | None = None
 
     @property
     def sigma(self) -> float:
@@ -64,6 +68,18 @@ class LearnerCore:
         self.agent_steps += agent_steps
         return self.version
 
+    def check_views(self, extent_m: float, shift_m: float) -> None:
+        """Fix the run's view square on the first push that reports one (extent > 0); raise
+        ``ViewMismatch`` for a push whose square differs: its agents see the junction through
+        other pixels, so its gradient belongs to another network's inputs."""
+        if not extent_m > 0:
+            return  # the sender does not say
+        if self.views is None:
+            self.views = (float(extent_m), float(shift_m))
+        elif not same_views(self.views, (extent_m, shift_m)):
+            raise ViewMismatch(f"the actor's agents see {describe_views((extent_m, shift_m))}; this run learns from "
+                               f"{describe_views(self.views)}")
+
     def init_weights(self, policy: Policy) -> None:
         """Start from another policy's weights (a curriculum across scenarios); version stays 0."""
         if asdict(policy.config) != asdict(self.policy_config):
@@ -81,6 +97,7 @@ class LearnerCore:
             "version": self.version, "agent_steps": self.agent_steps, "policy": self.policy.state_dict(),
             "optimizer": self.optimizer.state_dict(), "config": asdict(self.config),
             "policy_config": asdict(self.policy_config),
+            "views": views_record(*self.views) if self.views is not None else None,
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -91,3 +108,5 @@ class LearnerCore:
         self.optimizer.load_state_dict(state["optimizer"])
         self.version = int(state["version"])
         self.agent_steps = int(state["agent_steps"])
+        views = state.get("views")  # absent in checkpoints written before it existed
+        self.views = (float(views["extent_m"]), float(views["shift_m"])) if views else None

@@ -10,6 +10,8 @@ from collections import deque
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, start_http_server
 
+from protocol.messages import REJECT_REASONS
+
 STALENESS_BUCKETS = (0, 1, 2, 4, 8, 16, 32, 64, 128, 256)  # [versions]
 ROLLING_EPISODES = 200  # the rolling reach rate and mean speed cover this many episodes
 
@@ -53,8 +55,7 @@ class LearnerMetrics:
         self._goals: deque[bool] = deque(maxlen=ROLLING_EPISODES)
         self._speeds: deque[float] = deque(maxlen=ROLLING_EPISODES)
         self._goals_by_scenario: dict[str, deque[bool]] = {}  # labels come from actors' configs: few
-        for reason in ("oversize", "malformed", "version", "type", "schema", "dtype", "shape",
-                       "non_finite", "stale"):
+        for reason in REJECT_REASONS:
             self.rejected.labels(reason)  # export zeros so dashboards see every reason
 
     def serve(self, port: int, address: str = "0.0.0.0"):

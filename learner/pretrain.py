@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from algo.imitation import DemonstrationBuffer, Episode, imitation_loss, newest_frames
-from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy
+from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy, views_record
 
 PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
                     "action_loss_sa", "value_loss_acc", "value_loss_sa", "student_episodes",
@@ -176,6 +176,7 @@ class Pretrainer:
         path.parent.mkdir(parents=True, exist_ok=True)
         torch.save({"policy": self.policy.state_dict(), "policy_config": asdict(self.policy.config),
                     "version": 0, "agent_steps": 0, "note": note,
+                    "views": views_record(self.sim.spec.views.extent_m, self.sim.spec.views.shift_m),
                     "pretrain": {**_config_dict(self.config), "samples": self.buffer.added,
                                  "updates": self.updates, "rounds": self.round}},
                    path)

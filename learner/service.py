@@ -30,7 +30,7 @@ from pathlib import Path
 import torch
 import zenoh
 
-from algo.policy import load_policy
+from algo.policy import ViewMismatch, load_policy
 from learner.core import LearnerConfig, LearnerCore, StaleGradient
 from learner.metrics import LearnerMetrics
 from protocol import keys
@@ -135,7 +135,7 @@ class LearnerService:
         self._rate_window: deque[tuple[float, int]] = deque()
         self._published_version = -1
         self._last_publish = 0.0
-        self._weights_cache: tuple[int, bytes] | None = None
+        self._weights_cache: tuple[tuple, bytes] | None = None  # ((version, views), payload)
         self.session: zenoh.Session | None = None
 
     # -- Zenoh callbacks (Zenoh's threads: never block, never call Zenoh) --------------------------
@@ -164,10 +164,13 @@ class LearnerService:
 
     def weights_payload(self) -> bytes:
         """Encoded newest weights, encoded once per version."""
-        if self._weights_cache is None or self._weights_cache[0] != self.core.version:
+        key = (self.core.version, self.core.views)
+        if self._weights_cache is None or self._weights_cache[0] != key:
+            extent_m, shift_m = self.core.views or (0.0, 0.0)
             message = Weights(version=self.core.version, sigma=self.core.sigma,
-                              tensors=self.core.weights(), run_id=self.run_id)
-            self._weights_cache = (self.core.version, encode(message))
+                              tensors=self.core.weights(), run_id=self.run_id,
+                              view_extent_m=extent_m, view_shift_m=shift_m)
+            self._weights_cache = (key, encode(message))
         return self._weights_cache[1]
 
     def handle_push(self, payload: bytes) -> bool:
@@ -176,9 +179,13 @@ class LearnerService:
             push = decode(payload, expect=GradientPush, max_bytes=self.config.max_message_bytes)
             check_shapes(push.tensors, self.core.shapes, "gradient")
             staleness = self.core.staleness(push.base_version)
+            self.core.check_views(push.view_extent_m, push.view_shift_m)
             self.core.apply(push.tensors, push.base_version, push.agent_steps)
         except DecodeError as error:
             self._reject(error.reason, str(error))
+            return False
+        except ViewMismatch as error:
+            self._reject("views", f"{push.actor_id}: {error}")
             return False
         except StaleGradient as error:
             self._reject("stale", str(error))

@@ -34,6 +34,7 @@ REJECT_REASONS = (
     "shape",  # a tensor's bytes disagree with its shape, or shapes differ from the expected
     "non_finite",  # NaN or infinity in a float tensor or number
     "stale",  # computed on weights older than the learner accepts
+    "views",  # from an actor whose agents see another view square than the run learns from
 )
 
 
@@ -122,6 +123,10 @@ class Weights(Message):
     sigma: float  # exploration standard deviation of the Gaussian policy at this version
     tensors: dict[str, np.ndarray] = field(default_factory=dict)
     run_id: str = ""
+    # the view square these weights learn from (side, centre ahead of the car) [m], fixed by the
+    # first gradient the run applied; 0: not fixed yet. An actor whose scenario shows another refuses them.
+    view_extent_m: float = 0.0
+    view_shift_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -138,6 +143,9 @@ class GradientPush(Message):
     loss_policy_sa: float = 0.0
     loss_value_acc: float = 0.0
     loss_value_sa: float = 0.0
+    # the view square of the actor's scenario (side, centre ahead of the car) [m]; 0: not said
+    view_extent_m: float = 0.0
+    view_shift_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -183,7 +191,7 @@ _FIELD_KINDS = {
     "pid": "int", "episodes_count": "int", "lane": "str", "sign": "str", "end_reason": "str",
     "steps": "int", "mean_speed_mps": "float", "return_acc": "float", "return_sa": "float",
     "turn": "str", "reach_rate": "float", "agent_steps_per_s": "float", "live_actors": "int",
-    "rejected": "int",
+    "rejected": "int", "view_extent_m": "float", "view_shift_m": "float",
 }
 
 

@@ -43,7 +43,7 @@ def test_gae_changes_the_policy_weights_but_not_the_value_target():
     # one-step TD errors: 0.005 + 0.9 * 0.1 - 0.3 = -0.205; -1 + 0 - 0.1 = -1.1
     assert td.advantages.tolist() == pytest.approx([-0.205, -1.1])
     assert paper.advantages.tolist() == pytest.approx([-1.195, -1.1])
-    assert float(td.value) == pytest.approx(float(paper.value))  # v still regresses on R_t
+    assert float(td.value.detach()) == pytest.approx(float(paper.value.detach()))  # v still regresses on R_t
     (grad_td,) = torch.autograd.grad(td.policy, mu)
     # d/dmu of -A log N(a | mu, sigma) = -A (a - mu) / sigma^2
     assert grad_td.tolist() == pytest.approx([0.205 * 0.2 / 0.25, 1.1 * -0.2 / 0.25])
@@ -124,6 +124,27 @@ def test_checkpoint_state_round_trips_and_refuses_another_network():
     assert all(np.array_equal(a, b) for a, b in zip(core.weights().values(), other.weights().values()))
     with pytest.raises(ValueError, match="does not match"):
         LearnerCore(policy_config=PolicyConfig(hidden=64)).load_state_dict(core.state_dict())
+
+
+def test_the_learner_fixes_its_view_square_on_the_first_push_that_reports_one():
+    from algo.policy import ViewMismatch
+
+    core = LearnerCore()
+    core.check_views(0.0, 0.0)  # a sender that does not say fixes nothing
+    assert core.views is None
+    core.check_views(70.0, 15.0)
+    core.check_views(70.0, 15.0)  # the same square again
+    with pytest.raises(ViewMismatch, match="see views 50 m wide, centred 0 m ahead.*learns from views 70 m"):
+        core.check_views(50.0, 0.0)
+    with pytest.raises(ViewMismatch):
+        core.check_views(70.0, 0.0)  # the same size placed elsewhere: other pixels too
+    restored = LearnerCore()
+    restored.load_state_dict(core.state_dict())
+    assert restored.views == (70.0, 15.0)
+    state = core.state_dict()
+    del state["views"]  # a checkpoint written before views were recorded
+    restored.load_state_dict(state)
+    assert restored.views is None
 
 
 def test_actor_core_sums_local_gradients_per_episode():

@@ -240,12 +240,21 @@ def test_bad_pushes_are_counted_by_reason_and_metrics_are_served(tmp_path):
             block = zenoh.CongestionControl.BLOCK
             session.put(key, b"\x93not a push", congestion_control=block)
             session.put(key, encode(GradientPush("x", 0, 10, wrong_shape, stats)), congestion_control=block)
-            session.put(key, encode(GradientPush("x", 0, 10, good, stats)), congestion_control=block)
+            session.put(key, encode(GradientPush("x", 0, 10, good, stats, view_extent_m=50.0)),
+                        congestion_control=block)
             wait_for(lambda: service.core.version == 1 and service._rejected == 2, 30, "one applied, two refused")
+            assert service.core.views == (50.0, 0.0)  # the first push that says fixes the run's view square
+            # an actor whose scenario shows a 70 m square: its gradient belongs to other inputs
+            session.put(key, encode(GradientPush("wide", 1, 10, good, stats, view_extent_m=70.0, view_shift_m=15.0)),
+                        congestion_control=block)
+            wait_for(lambda: service._rejected == 3, 30, "the other view square refused")
+            served = decode(next(iter(session.get(keys.weights("default"), timeout=10))).ok.payload.to_bytes())
+            assert (served.version, served.view_extent_m, served.view_shift_m) == (1, 50.0, 0.0)
         assert thread.is_alive()
         text = urllib.request.urlopen(f"http://127.0.0.1:{metrics_port}/metrics", timeout=10).read().decode()
         assert 'crossway_rejected_messages_total{reason="malformed"} 1.0' in text
         assert 'crossway_rejected_messages_total{reason="shape"} 1.0' in text
+        assert 'crossway_rejected_messages_total{reason="views"} 1.0' in text
         assert 'crossway_episodes_total{end_reason="goal",scenario="easy",sign="stop"} 1.0' in text
         assert "crossway_weights_version 1.0" in text
         for name in ("crossway_updates_total", "crossway_gradient_staleness_versions_bucket", "crossway_live_actors",
@@ -304,6 +313,54 @@ def test_a_new_run_starts_from_given_weights_and_a_resumed_run_ignores_them(tmp_
     service = LearnerService(config, log=logs.append)
     assert service.core.version == 42
     np.testing.assert_array_equal(service.core.weights()["acc.hidden.weight"], resumed.weights()["acc.hidden.weight"])
+
+
+def test_an_actor_refuses_a_run_that_learns_from_another_view_square(tmp_path):
+    """A run resumed with its view square (a 70 m window placed 15 m ahead) meets an actor on
+    plain easy (the paper's 50 m, centred): the actor stops with a message, pushing nothing."""
+    import torch
+
+    from actors.worker import EXIT_VIEWS_MISMATCH
+    from learner.core import LearnerCore
+
+    wide = LearnerCore(seed=1)
+    wide.views = (70.0, 15.0)
+    (tmp_path / "checkpoints").mkdir()
+    torch.save(wide.state_dict(), tmp_path / "checkpoints" / "ckpt-000000000.pt")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    service = LearnerService(LearnerServiceConfig(
+        run_dir=tmp_path, transport=TransportConfig(listen=(endpoint,)), metrics_port=0,
+        checkpoint_interval_s=3600), log=lambda _: None)
+    assert service.core.views == (70.0, 15.0)
+    thread = threading.Thread(target=service.run, daemon=True)
+    thread.start()
+    actor = start_actor(endpoint, "narrow")
+    try:
+        _, err = actor.communicate(timeout=90)
+        assert actor.returncode == EXIT_VIEWS_MISMATCH, err
+        assert "learns from views 70 m wide, centred 15 m ahead" in err and "shows views 50 m wide" in err
+        assert service.core.version == 0 and not service.pushes_by_actor
+    finally:
+        stop(actor)
+        service.stop()
+        thread.join(timeout=30)
+
+
+def test_train_refuses_to_resume_a_run_on_another_view_square(tmp_path):
+    import torch
+
+    from learner.core import LearnerCore
+
+    wide = LearnerCore(seed=1)
+    wide.views = (70.0, 15.0)
+    (tmp_path / "run" / "checkpoints").mkdir(parents=True)
+    torch.save(wide.state_dict(), tmp_path / "run" / "checkpoints" / "ckpt-000000000.pt")
+    done = subprocess.run([sys.executable, "-m", "crossway", "train", "--scenario", "easy", "--minutes", "1",
+                           "--run-dir", str(tmp_path / "run"), "--metrics-port", "0"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert "learnt from views 70 m wide, centred 15 m ahead of the car" in done.stderr
+    assert "another --run-dir" in done.stderr
 
 
 def test_a_resumed_run_goes_on_with_its_episode_count_and_rolling_reach_rate(tmp_path):

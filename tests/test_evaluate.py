@@ -185,3 +185,41 @@ def test_evaluations_run_a_scenario_file_with_its_own_views(tmp_path):
                      "--workers", "2", "--out", str(tmp_path / "row"))
     assert rules.returncode == 0, rules.stderr
     assert (tmp_path / "row" / "right-of-way-easy-wide.csv").exists()
+    # a policy records the view square it learnt from: it is refused on a junction shown through another
+    wide = tmp_path / "wide.pt"
+    core = LearnerCore()
+    core.views = (70.0, 15.0)
+    torch.save(core.state_dict(), wide)
+    on_its_own = crossway("evaluate", "table1", "--checkpoint", str(wide), "--scenario", str(scenario),
+                          "--episodes", "1", "--workers", "1", "--out", str(tmp_path / "own"))
+    assert on_its_own.returncode == 0, on_its_own.stderr
+    for command in (("table1",), ("right-of-way",), ("reaction",)):
+        refused = crossway("evaluate", *command, "--checkpoint", str(wide), "--scenario", "easy",
+                           "--episodes", "1", "--out", str(tmp_path / "never"))
+        assert refused.returncode == 2, refused.stderr
+        assert ("learnt from views 70 m wide, centred 15 m ahead of the car, but scenario 'easy' shows views 50 m "
+                "wide" in refused.stderr), refused.stderr
+    ttc = crossway("evaluate", "ttc", "--checkpoint", str(wide), "--episodes", "1", "--out", str(tmp_path / "never"))
+    assert ttc.returncode == 2 and "scenario 'hard' shows views 50 m wide" in ttc.stderr, ttc.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_a_policy_file_without_a_views_record_reads_as_the_papers_views(tmp_path):
+    """models/*.pt predate the record; exporting keeps a record and keeps its absence."""
+    from algo.policy import PAPER_VIEWS, policy_views
+
+    assert policy_views("models/easy.pt") == PAPER_VIEWS == (50.0, 0.0)
+    core = LearnerCore()
+    assert core.state_dict()["views"] is None
+    fresh = tmp_path / "fresh.pt"
+    torch.save(core.state_dict(), fresh)
+    assert policy_views(fresh) is None  # no actor has reported yet: any views go
+    core.views = (70.0, 15.0)
+    torch.save(core.state_dict(), tmp_path / "wide.pt")
+    exported = crossway("evaluate", "export", "--checkpoint", str(tmp_path / "wide.pt"), "--out",
+                        str(tmp_path / "small.pt"))
+    assert exported.returncode == 0, exported.stderr
+    assert policy_views(tmp_path / "small.pt") == (70.0, 15.0)
+    old = crossway("evaluate", "export", "--checkpoint", "models/easy.pt", "--out", str(tmp_path / "old.pt"))
+    assert old.returncode == 0, old.stderr
+    assert "views" not in torch.load(tmp_path / "old.pt", weights_only=False)

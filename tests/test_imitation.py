@@ -135,6 +135,9 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
     assert "teacher drives 100%" in result.stdout and "wrote" in result.stdout
     policy = load_policy(out / "pretrained.pt")  # what train --init-from and evaluate use
     assert isinstance(policy, Policy)
+    from algo.policy import policy_views
+
+    assert policy_views(out / "pretrained.pt") == (50.0, 0.0)  # recorded: easy shows the paper's views
     rows = list(csv.DictReader((out / "progress.csv").open()))
     assert rows and {"round", "teacher_probability", "samples", "action_loss_acc", "student_reach_rate"} <= set(rows[0])
     probabilities = [float(r["teacher_probability"]) for r in rows]

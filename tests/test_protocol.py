@@ -221,7 +221,7 @@ def test_decode_accepts_bytearray_and_memoryview():
 
 def test_reject_reasons_are_all_covered_here():
     covered = {"oversize", "malformed", "version", "type", "schema", "dtype", "shape", "non_finite"}
-    assert set(REJECT_REASONS) - covered == {"stale"}  # "stale" is the learner's call, not the codec's
+    assert set(REJECT_REASONS) - covered == {"stale", "views"}  # the learner's calls, not the codec's
 
 
 def test_oversize():
@@ -507,3 +507,17 @@ def test_keys_reject_trailing_newline():
         keys.weights("run\n")
     with pytest.raises(ValueError):
         keys.hello("run", "actor\n")
+
+
+def test_the_view_square_travels_with_weights_and_gradients_and_defaults_to_unsaid():
+    weights = decode(encode(Weights(version=3, sigma=0.1, view_extent_m=70.0, view_shift_m=15.0)))
+    assert (weights.view_extent_m, weights.view_shift_m) == (70.0, 15.0)
+    push = decode(encode(GradientPush(actor_id="a", base_version=0, agent_steps=1, view_extent_m=50)))
+    assert (push.view_extent_m, push.view_shift_m) == (50.0, 0.0)
+    # a sender that predates the fields: 0 says "not said", which the learner does not check
+    body = {"actor_id": "a", "base_version": 0, "agent_steps": 1}
+    old = decode(msgpack.packb({"v": PROTOCOL_VERSION, "type": "gradient", "body": body}, use_bin_type=True))
+    assert old.view_extent_m == 0.0
+    with pytest.raises(DecodeError) as error:
+        decode(encode(GradientPush(actor_id="a", base_version=0, agent_steps=1, view_extent_m=float("nan"))))
+    assert error.value.reason == "non_finite"

@@ -293,6 +293,18 @@ def _child_learner(config, handlers_set) -> None:
     sys.exit(run_learner(config, stop_requested=early_stop.is_set))
 
 
+def check_resumed_views(run_dir, spec) -> None:
+    """Refuse to resume a run whose weights learnt from another view square than ``spec`` shows
+    (every actor would refuse its weights); a fresh run takes the views of its first actors."""
+    from algo.policy import require_views
+    from learner.service import newest_checkpoint
+
+    checkpoint = newest_checkpoint(run_dir)
+    if checkpoint is not None:
+        require_views(checkpoint, (spec.views.extent_m, spec.views.shift_m), spec.name,
+                      "resume it on a scenario with its [views], or give another --run-dir")
+
+
 def _child_actor(config) -> None:
     from actors.worker import run_actor
 
@@ -321,6 +333,7 @@ def run_train_command(args) -> int:
     if args.curriculum == "single" and delay_max is None:
         delay_max = 0.0  # alone on the road: no reason to wait
     learner_cfg = learner_config(args, (endpoint,), ())
+    check_resumed_views(args.run_dir, load_scenario(args.scenario))
     actor_cfgs = []
     for i in range(args.actors):
         lanes = (lane_names[i % len(lane_names)],) if args.curriculum == "single" else None
@@ -370,7 +383,8 @@ def run_train_command(args) -> int:
         if new_by_scenario:  # one row per scenario label and status: the yield drill apart from hard
             by_writer.writerow(["wall_s", "version", "agent_steps", "scenario", "reach_rate"])
         subscriber = session.declare_subscriber(keys.status(args.run_name), zenoh.handlers.RingChannel(16))
-        while not interrupted and time.monotonic() < deadline and learner.is_alive():
+        while (not interrupted and time.monotonic() < deadline and learner.is_alive()
+               and any(process.is_alive() for process in actors)):
             sample = subscriber.try_recv()  # the newest status; the ring keeps the last few
             if sample is None:
                 time.sleep(0.2)
@@ -407,7 +421,9 @@ def run_train_command(args) -> int:
     if interactive:
         print(file=sys.stderr)
     signal.signal(signal.SIGINT, previous)
-    reason = "interrupted" if interrupted else ("learner exited" if not learner.is_alive() else "time is up")
+    actors_failed = not interrupted and learner.is_alive() and not any(process.is_alive() for process in actors)
+    reason = ("interrupted" if interrupted else "learner exited" if not learner.is_alive()
+              else "every actor exited (their messages are above)" if actors_failed else "time is up")
     print(f"train: {reason}; stopping actors, then the learner (it writes a checkpoint)", file=sys.stderr)
     for process in actors:
         if process.is_alive():
@@ -422,4 +438,4 @@ def run_train_command(args) -> int:
     if latest is not None:
         print(f"train: version {latest.version}, {latest.agent_steps:,} agent-steps, {latest.episodes:,} "
               f"episodes, reach rate {latest.reach_rate:.1%} over the last episodes; progress in {progress_path}")
-    return 0 if learner.exitcode == 0 else 1
+    return 0 if learner.exitcode == 0 and not actors_failed else 1

@@ -114,9 +114,10 @@ def run(args) -> int:
     sim = Simulator(args.scenario, config, seed=args.seed)
     focus = choose_focus(sim, None, args.focus)  # refuses a bad --focus before simulating
     if args.checkpoint is not None:
-        from evaluation.policy import PolicyDriver, load_policy
+        from evaluation.policy import PolicyDriver, check_checkpoint, load_policy
 
-        policy = PolicyDriver(sim, load_policy(args.checkpoint))  # refuses a bad checkpoint now
+        check_checkpoint(args.checkpoint, sim.spec)  # refuses a bad checkpoint now
+        policy = PolicyDriver(sim, load_policy(args.checkpoint))
     else:
         scripted = ScriptedDriver(sim)
     reasons: Counter[str] = Counter()
