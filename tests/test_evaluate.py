@@ -223,3 +223,55 @@ def test_a_policy_file_without_a_views_record_reads_as_the_papers_views(tmp_path
     old = crossway("evaluate", "export", "--checkpoint", "models/easy.pt", "--out", str(tmp_path / "old.pt"))
     assert old.returncode == 0, old.stderr
     assert "views" not in torch.load(tmp_path / "old.pt", weights_only=False)
+
+
+def _pool_workers(pid: int) -> list[int]:
+    """The spawned worker processes among ``pid``'s children (not its resource tracker)."""
+    from pathlib import Path
+
+    children = Path(f"/proc/{pid}/task/{pid}/children")
+    pids = [int(c) for c in children.read_text().split()] if children.exists() else []
+    return [c for c in pids if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes()]
+
+
+def _running(pid: int) -> bool:
+    """Alive and not a zombie waiting for a parent to reap it."""
+    from pathlib import Path
+
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("stop_signal", ["SIGTERM", "SIGKILL"])
+def test_stopping_an_evaluation_stops_its_workers(tmp_path, stop_signal):
+    """A scheduler's SIGTERM ends the pool before the command exits; after a SIGKILL, which
+    nothing can catch, the orphaned workers notice their parent is gone and exit."""
+    import signal
+    import time
+
+    command = [sys.executable, "-m", "crossway", "evaluate", "right-of-way", "--scripted", "--scenario", "hard",
+               "--episodes", "2000", "--workers", "2", "--out", str(tmp_path)]
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while len(workers := _pool_workers(process.pid)) < 2 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert len(workers) == 2, "the workers did not start"
+        time.sleep(1.0)  # they are driving now
+        process.send_signal(getattr(signal, stop_signal))
+        process.wait(timeout=30)
+        if stop_signal == "SIGTERM":
+            assert process.returncode == 128 + signal.SIGTERM
+        deadline = time.monotonic() + 10
+        while any(_running(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not any(_running(w) for w in workers), f"workers {workers} outlived the command"
+        assert not (tmp_path / "right-of-way-hard.json").exists()
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.stderr.close()
