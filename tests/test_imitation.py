@@ -85,7 +85,7 @@ def test_imitation_loss_is_zero_where_the_network_already_agrees_and_ignores_unk
     batch["targets"] = torch.stack([mu_acc, mu_sa], 1).numpy()
     batch["returns"][:] = 123.0  # far off, but unknown: must not count
     loss, metrics = imitation_loss(policy, batch, value_coef=1.0)
-    assert float(loss) == pytest.approx(0.0, abs=1e-10)
+    assert float(loss.detach()) == pytest.approx(0.0, abs=1e-10)
     assert metrics["value_loss_acc"] == 0.0
     batch["value_known"][:] = True
     loss, metrics = imitation_loss(policy, batch, value_coef=1.0)
