@@ -49,3 +49,19 @@ def test_teacher_sight_prints_one_line_per_window():
     assert [(l["sight_m"], l["sight_shift_m"]) for l in lines] == [
         (25.0, 0.0), (25.0, 15.0), (35.0, 0.0), (35.0, 15.0), (50.0, 0.0), (None, 0.0)]
     assert all(l["episodes"] >= 12 and abs(l["reach"] + l["crash"] + l["time_over"] - 1.0) < 0.002 for l in lines)
+
+
+def test_brake_learnability_scores_both_sets_after_every_epoch():
+    result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/brake_learnability.py"), "--train-samples",
+                             "1500", "--held-out-samples", "800", "--epochs", "1", "--threads", "1"],
+                            capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert [e["epoch"] for e in report["epochs"]] == [0, 1] and report["epochs"][1]["updates"] > 0
+    for epoch in report["epochs"]:
+        for name in ("train", "held_out"):
+            scores = epoch[name]
+            assert scores["samples"] > 0 and 0.0 <= scores["braking_share"] <= 1.0
+            assert scores["mse_acc"] >= 0.0
+    # the training set is the one learnt from: its error falls
+    assert report["epochs"][1]["train"]["mse_acc"] < report["epochs"][0]["train"]["mse_acc"]
