@@ -102,7 +102,8 @@ class ActorService:
 
     def push(self, session: zenoh.Session, episode: FinishedEpisode) -> None:
         s = episode.summary
-        stats = EpisodeStats(scenario=self.config.episode_label or self.sim.spec.name, lane=s.lane, sign=s.sign, end_reason=s.end_reason,
+        stats = EpisodeStats(scenario=self.config.episode_label or self.sim.spec.name, lane=s.lane, sign=s.sign,
+                             end_reason=s.end_reason,
                              steps=s.steps, mean_speed_mps=s.mean_speed_mps, return_acc=s.return_acc,
                              return_sa=s.return_sa, turn=s.turn)
         losses = episode.mean_losses

@@ -146,7 +146,8 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     paper = PAPER_TABLE2.get(spec.name)
     stem.with_suffix(".csv").write_text(
         "scenario,episodes,no_infraction,infraction,paper_no_infraction\n"
-        f"{spec.name},{episodes},{summary['no_infraction']:.4f},{summary['infraction']:.4f},{'' if paper is None else paper}\n")
+        f"{spec.name},{episodes},{summary['no_infraction']:.4f},{summary['infraction']:.4f},"
+        f"{'' if paper is None else paper}\n")
     table = ("| | ours | paper |\n|---|---|---|\n"
              f"| No infraction | {summary['no_infraction']:.3f} | {'-' if paper is None else f'{paper:.3f}'} |\n"
              f"| Infraction | {summary['infraction']:.3f} | {'-' if paper is None else f'{1 - paper:.3f}'} |\n")

@@ -140,7 +140,8 @@ def markdown(scenario: str, table: dict) -> str:
             fmt = "{:.3f}"
             cells += [fmt.format(ours) if ours is not None else "-", fmt.format(theirs) if theirs is not None else "-"]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines.append("| Episodes | " + " | ".join(f"{table.get(s, {}).get('episodes', 0)} | 3000 per test" for s in SIGNS) + " |")
+    counts = (f"{table.get(s, {}).get('episodes', 0)} | 3000 per test" for s in SIGNS)
+    lines.append("| Episodes | " + " | ".join(counts) + " |")
     return "\n".join(lines) + "\n"
 
 

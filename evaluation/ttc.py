@@ -90,9 +90,9 @@ class TTCDriver:
             to_line = route.junction_entry_s - self.stop_margin_m - (sim.s[slot] + 0.5 * VEHICLE_LENGTH)
             if not self.going[slot]:
                 stopped = speed < 0.1 and to_line < 1.0
-                ttc = lowest_ttc(sim.x[slot], sim.y[slot], sim.heading[slot], cars, ego_half_width_m=0.5 * VEHICLE_WIDTH,
-                                 car_half_length_m=0.5 * VEHICLE_LENGTH, car_half_width_m=0.5 * VEHICLE_WIDTH,
-                                 ahead_only=True)
+                ttc = lowest_ttc(sim.x[slot], sim.y[slot], sim.heading[slot], cars,
+                                 ego_half_width_m=0.5 * VEHICLE_WIDTH, car_half_length_m=0.5 * VEHICLE_LENGTH,
+                                 car_half_width_m=0.5 * VEHICLE_WIDTH, ahead_only=True)
                 if stopped and ttc > self.threshold_s:
                     self.going[slot] = True
             if self.going[slot]:

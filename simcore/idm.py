@@ -33,7 +33,8 @@ class IDMParameters:
 
 def desired_gap(speed, closing_speed, p: IDMParameters = IDMParameters()):
     """s*(v, dv) [m]; never below the jam distance s0."""
-    dynamic = speed * p.time_gap_s + speed * closing_speed / (2.0 * math.sqrt(p.max_acceleration * p.comfortable_deceleration))
+    braking_scale = 2.0 * math.sqrt(p.max_acceleration * p.comfortable_deceleration)
+    dynamic = speed * p.time_gap_s + speed * closing_speed / braking_scale
     return p.minimum_gap_m + np.maximum(0.0, dynamic)
 
 

@@ -89,8 +89,10 @@ def test_cut_and_restore_an_actors_link(hosts, tmp_path):
     learner = spawn(LEARNER, "learner", "--run-dir", str(tmp_path / "run"), "--listen", "tcp/0.0.0.0:7447",
                     "--metrics-port", "9100", log=log)
     common = ("--scenario", "easy", "--delay-max", "0.5", "--update-interval", "10")
-    actors = [spawn(A1, "actor", "--connect", "tcp/10.77.1.1:7447", "--id", "far-a", "--seed", "1", *common, log=subprocess.DEVNULL),
-              spawn(A2, "actor", "--connect", "tcp/10.77.2.1:7447", "--id", "far-b", "--seed", "2", *common, log=subprocess.DEVNULL)]
+    actors = [spawn(A1, "actor", "--connect", "tcp/10.77.1.1:7447", "--id", "far-a", "--seed", "1", *common,
+                    log=subprocess.DEVNULL),
+              spawn(A2, "actor", "--connect", "tcp/10.77.2.1:7447", "--id", "far-b", "--seed", "2", *common,
+                    log=subprocess.DEVNULL)]
     text = lambda: (tmp_path / "learner.log").read_text()  # noqa: E731
     try:
         wait(lambda: metric("crossway_live_actors") == 2 and metric("crossway_updates_total") >= 10, 180,

@@ -48,7 +48,8 @@ def test_mutual_tls_lets_actors_in_and_keeps_others_out(tmp_path, certs):
     actor = subprocess.Popen(
         [sys.executable, "-m", "crossway", "actor", "--connect", f"tls/localhost:{port}", "--id", "trusted",
          "--scenario", "easy", "--delay-max", "0.5", "--update-interval", "10", "--seed", "1",
-         "--tls-root-ca", str(good / "ca.pem"), "--tls-cert", str(good / "actor.pem"), "--tls-key", str(good / "actor.key")],
+         "--tls-root-ca", str(good / "ca.pem"), "--tls-cert", str(good / "actor.pem"),
+         "--tls-key", str(good / "actor.key")],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         wait_for(lambda: service.pushes_by_actor.get("trusted", 0) >= 2, 120, "the trusted actor's pushes")

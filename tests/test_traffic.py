@@ -17,7 +17,8 @@ def ttc_like(max_cars=8, traffic_delay_s=5.0, **changes):
     """Hard junction, learners on the stop-sign arm, IDM traffic on the main road waiting up to
     ``traffic_delay_s`` between trips; ``changes`` go to SimConfig."""
     config = SimConfig(lanes=("south_0", "south_1"), signs=SIGNS,
-                       traffic=TrafficConfig(lanes=MAIN_ROAD, max_cars=max_cars, delay_max_s=traffic_delay_s), **changes)
+                       traffic=TrafficConfig(lanes=MAIN_ROAD, max_cars=max_cars, delay_max_s=traffic_delay_s),
+                       **changes)
     return Simulator("hard", config, seed=0)
 
 

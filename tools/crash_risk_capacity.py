@@ -88,8 +88,8 @@ def main() -> int:
             with torch.no_grad():
                 scores = np.concatenate([network(*preprocess(views[i:i + 512], speeds[i:i + 512]))[1].numpy()
                                          for i in range(split, len(labels), 512)])
-            print(json.dumps({"init": init, "epoch": epoch + 1, "held_out_auc": round(roc_auc(scores, labels[split:]), 4)}),
-                  flush=True)
+            auc = round(roc_auc(scores, labels[split:]), 4)
+            print(json.dumps({"init": init, "epoch": epoch + 1, "held_out_auc": auc}), flush=True)
     return 0
 
 

@@ -30,8 +30,8 @@ def add_parser(subparsers) -> None:
                              "[views] say otherwise; the teacher of 'crossway pretrain --teacher-sight view')")
     table1.add_argument("--scripted-approach-speed", type=float, default=None, metavar="M_PER_S",
                         help="with --scripted: slow to this speed [m/s] before every conflict zone shared with a "
-                             "route that would have priority, whether or not a car is there (a driver that expects cars it "
-                             "cannot see yet); default: no such caution")
+                             "route that would have priority, whether or not a car is there (a driver that expects "
+                             "cars it cannot see yet); default: no such caution")
     _add_run_options(table1, episodes=3000, episodes_help="episodes per test (the paper: 3000)")
     table1.set_defaults(func=run_table1_command)
 
