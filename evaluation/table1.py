@@ -108,7 +108,9 @@ def merge_chunks(parts: list[dict]) -> list[dict]:
 
 
 def summarise(tests: list[dict]) -> dict:
-    """Per sign: each outcome's fraction and the mean speed, averaged over the tests."""
+    """Per sign: each outcome's fraction and the mean speed, averaged over the tests, and the
+    standard error of the averaged reach (``goal_stderr``: each test a binomial sample,
+    sqrt(sum p_i (1 - p_i) / n_i) / k over its k tests)."""
     table = {}
     for sign in SIGNS:
         rows = []
@@ -123,8 +125,32 @@ def summarise(tests: list[dict]) -> dict:
             rows.append(row)
         if rows:
             table[sign] = {key: sum(r[key] for r in rows) / len(rows) for key in (*OUTCOMES, "speed_mps")}
+            variance = sum(r["goal"] * (1.0 - r["goal"]) / r["episodes"] for r in rows)
+            table[sign]["goal_stderr"] = variance ** 0.5 / len(rows)
             table[sign]["episodes"] = sum(r["episodes"] for r in rows)
     return table
+
+
+def per_test_rows(tests: list[dict]) -> list[dict]:
+    """One row per test and sign (and "all", the test's episodes of every sign together): its
+    episodes, the fraction of each outcome and the mean speed [m/s]; the tests of Table I
+    before they are averaged."""
+    rows = []
+    for test in tests:
+        groups = [(sign, test["counts"].get(sign, {}), test["speed_sum"].get(sign, 0.0)) for sign in SIGNS]
+        every = Counter()
+        for _, counts, _ in groups:
+            every.update(counts)
+        groups.append(("all", dict(every), sum(test["speed_sum"].get(sign, 0.0) for sign in SIGNS)))
+        for sign, counts, speed_sum in groups:
+            total = sum(counts.values())
+            if total == 0:
+                continue
+            row = {"delay_max_s": test["delay_max_s"], "sign": sign, "episodes": total}
+            row.update({o: counts.get(o, 0) / total for o in OUTCOMES})
+            row["speed_mps"] = speed_sum / total
+            rows.append(row)
+    return rows
 
 
 def markdown(scenario: str, table: dict) -> str:
@@ -140,8 +166,25 @@ def markdown(scenario: str, table: dict) -> str:
             fmt = "{:.3f}"
             cells += [fmt.format(ours) if ours is not None else "-", fmt.format(theirs) if theirs is not None else "-"]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    errors = (f"{table[s]['goal_stderr']:.3f} | -" if s in table else "- | -" for s in SIGNS)
+    lines.append("| Reaches, standard error | " + " | ".join(errors) + " |")
     counts = (f"{table.get(s, {}).get('episodes', 0)} | 3000 per test" for s in SIGNS)
     lines.append("| Episodes | " + " | ".join(counts) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def markdown_tests(rows: list[dict]) -> str:
+    """The per-test table: reach (and crashes) per sign and over all signs, one line per test."""
+    groups = (*SIGNS, "all")
+    header = "| delay_max [s] | " + " | ".join(f"{g}: reaches / crashes (episodes)" for g in groups) + " |"
+    lines = [header, "|---|" + "---|" * len(groups)]
+    by_test: dict[float, dict[str, dict]] = defaultdict(dict)
+    for row in rows:
+        by_test[row["delay_max_s"]][row["sign"]] = row
+    for delay, cells in by_test.items():
+        text = [f"{cells[g]['goal']:.3f} / {cells[g]['crash']:.3f} ({cells[g]['episodes']})" if g in cells else "-"
+                for g in groups]
+        lines.append(f"| {delay:g} | " + " | ".join(text) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -155,14 +198,22 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
     paper = PAPER_TABLE1.get(scenario, {})
     rows = ["sign,metric,ours,paper"]
     for sign in SIGNS:
-        for i, metric in enumerate((*OUTCOMES, "speed_mps")):
+        for i, metric in enumerate((*OUTCOMES, "speed_mps", "goal_stderr")):
             ours = table.get(sign, {}).get(metric)
-            theirs = paper.get(sign, (None,) * 5)[i]
+            theirs = paper.get(sign, (None,) * 5)[i] if i < 5 else None  # the paper gives no error
             rows.append(f"{sign},{metric},{'' if ours is None else round(ours, 5)},{'' if theirs is None else theirs}")
     csv_path.write_text("\n".join(rows) + "\n")
+    test_rows = per_test_rows(tests)
+    tests_csv_path = out_dir / f"table1-{scenario}-tests.csv"
+    columns = ("delay_max_s", "sign", "episodes", *OUTCOMES, "speed_mps")
+    lines = [",".join(columns)]
+    lines += [",".join(str(round(r[c], 5)) if isinstance(r[c], float) else str(r[c]) for c in columns)
+              for r in test_rows]
+    tests_csv_path.write_text("\n".join(lines) + "\n")
     md_path = stem.with_suffix(".md")
-    md_path.write_text(f"# Table I, {scenario}\n\n{meta['command']}\n\n" + markdown(scenario, table))
-    return [json_path, csv_path, md_path]
+    md_path.write_text(f"# Table I, {scenario}\n\n{meta['command']}\n\n" + markdown(scenario, table)
+                       + "\n## Per test\n\n" + markdown_tests(test_rows))
+    return [json_path, csv_path, tests_csv_path, md_path]
 
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,

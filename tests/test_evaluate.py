@@ -45,8 +45,15 @@ def test_table1_scripted_end_to_end(tmp_path):
     assert sum(sum(c.values()) for t in report["tests"] for c in t["counts"].values()) == 18
     rows = list(csv.DictReader(open(tmp_path / "table1-easy.csv")))
     assert set(rows[0]) == {"sign", "metric", "ours", "paper"}
-    assert {r["metric"] for r in rows} == {"goal", "crash", "off_path", "time_over", "speed_mps"}
-    assert "(paper)" in (tmp_path / "table1-easy.md").read_text()
+    assert {r["metric"] for r in rows} == {"goal", "crash", "off_path", "time_over", "speed_mps", "goal_stderr"}
+    tests = list(csv.DictReader(open(tmp_path / "table1-easy-tests.csv")))
+    assert list(tests[0]) == ["delay_max_s", "sign", "episodes", "goal", "crash", "off_path", "time_over",
+                              "speed_mps"]
+    every = [r for r in tests if r["sign"] == "all"]
+    assert [float(r["delay_max_s"]) for r in every] == [10.0, 20.0, 30.0]
+    assert [int(r["episodes"]) for r in every] == [6, 6, 6]
+    page = (tmp_path / "table1-easy.md").read_text()
+    assert "(paper)" in page and "| Reaches, standard error |" in page and "## Per test" in page
 
 
 def test_table1_scripted_with_the_views_sight(tmp_path):

@@ -238,3 +238,22 @@ def test_table1_chunks_of_a_test_are_summed():
     table = summarise(tests)
     assert table["stop"]["goal"] == pytest.approx(7 / 8) and table["stop"]["speed_mps"] == pytest.approx(7.5)
     assert table["none"]["goal"] == 1.0 and table["none"]["episodes"] == 3
+
+
+def test_table1_reach_error_and_per_test_rows():
+    from evaluation.table1 import per_test_rows, summarise
+
+    # stop: 3 of 4 reach in the first test, 1 of 2 in the second; none: 1 of 1 in the first
+    tests = [{"delay_max_s": 10.0, "counts": {"stop": {"goal": 3, "crash": 1}, "none": {"goal": 1}},
+              "speed_sum": {"stop": 32.0, "none": 9.0}},
+             {"delay_max_s": 20.0, "counts": {"stop": {"goal": 1, "time_over": 1}}, "speed_sum": {"stop": 10.0}}]
+    table = summarise(tests)
+    assert table["stop"]["goal"] == pytest.approx((0.75 + 0.5) / 2)
+    # sqrt(0.75 * 0.25 / 4 + 0.5 * 0.5 / 2) / 2 tests
+    assert table["stop"]["goal_stderr"] == pytest.approx((0.75 * 0.25 / 4 + 0.25 / 2) ** 0.5 / 2)
+    assert table["none"]["goal_stderr"] == 0.0
+    rows = {(r["delay_max_s"], r["sign"]): r for r in per_test_rows(tests)}
+    assert set(rows) == {(10.0, "stop"), (10.0, "none"), (10.0, "all"), (20.0, "stop"), (20.0, "all")}
+    assert rows[(10.0, "all")]["episodes"] == 5 and rows[(10.0, "all")]["goal"] == pytest.approx(0.8)
+    assert rows[(10.0, "all")]["crash"] == pytest.approx(0.2) and rows[(10.0, "all")]["speed_mps"] == pytest.approx(8.2)
+    assert rows[(20.0, "stop")]["time_over"] == 0.5 and rows[(20.0, "stop")]["speed_mps"] == 5.0
