@@ -112,17 +112,9 @@ def summarise(tests: list[dict]) -> dict:
     standard error of the averaged reach (``goal_stderr``: each test a binomial sample,
     sqrt(sum p_i (1 - p_i) / n_i) / k over its k tests)."""
     table = {}
+    per_test = per_test_rows(tests)
     for sign in SIGNS:
-        rows = []
-        for test in tests:
-            counts = test["counts"].get(sign, {})
-            total = sum(counts.values())
-            if total == 0:
-                continue
-            row = {o: counts.get(o, 0) / total for o in OUTCOMES}
-            row["speed_mps"] = test["speed_sum"].get(sign, 0.0) / total
-            row["episodes"] = total
-            rows.append(row)
+        rows = [r for r in per_test if r["sign"] == sign]
         if rows:
             table[sign] = {key: sum(r[key] for r in rows) / len(rows) for key in (*OUTCOMES, "speed_mps")}
             variance = sum(r["goal"] * (1.0 - r["goal"]) / r["episodes"] for r in rows)
@@ -146,7 +138,7 @@ def per_test_rows(tests: list[dict]) -> list[dict]:
             total = sum(counts.values())
             if total == 0:
                 continue
-            row = {"delay_max_s": test["delay_max_s"], "sign": sign, "episodes": total}
+            row = {"delay_max_s": test.get("delay_max_s"), "sign": sign, "episodes": total}
             row.update({o: counts.get(o, 0) / total for o in OUTCOMES})
             row["speed_mps"] = speed_sum / total
             rows.append(row)
