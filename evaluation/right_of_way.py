@@ -68,14 +68,16 @@ PAPER_TABLE2 = {"easy": 0.985, "medium": 0.990, "hard": 0.863}  # "No infraction
 
 
 def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes: int, seed: int,
-                 progress=None) -> dict:
+                 scripted_sight: str | None = None, progress=None) -> dict:
     """Synchronised episodes: every lane starts at once with a random route and sign, all cars at
     the same current and target speed; an episode ends when every car has ended (paper,
-    "Testing the Right of Way Rule"). Runs in a worker process."""
+    "Testing the Right of Way Rule"). Without a checkpoint the scripted driver drives, seeing
+    every car or (``scripted_sight="view"``) only those inside the learners' views. Runs in a
+    worker process."""
     import torch
 
     from evaluation.policy import PolicyDriver, load_policy
-    from simcore.controller import ScriptedDriver
+    from simcore.controller import ScriptedDriver, view_sight
     from simcore.simulator import SimConfig, Simulator
 
     torch.set_num_threads(1)
@@ -89,7 +91,10 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
     limit = int(sim.time_limit_s / 0.1) + 2
     for episode in range(episodes):
         result = sim.reset()
-        driver = PolicyDriver(sim, policy) if policy is not None else ScriptedDriver(sim)
+        if policy is not None:
+            driver = PolicyDriver(sim, policy)
+        else:
+            driver = ScriptedDriver(sim, **(view_sight(sim) if scripted_sight == "view" else {}))
         routes, signs = sim.route[: sim.num_slots].copy(), sim.sign[: sim.num_slots].copy()
         tracks = np.full((sim.num_slots, limit), np.nan)
         tracks[:, 0] = sim.s[: sim.num_slots]
@@ -111,7 +116,7 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
 
 
 def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
-                     out_dir, command: str) -> dict:
+                     out_dir, command: str, scripted_sight: str | None = None) -> dict:
     """The whole test in parallel workers; writes JSON, CSV and Markdown into ``out_dir``."""
     import json
     import time
@@ -128,16 +133,19 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     workers = max(1, min(workers, episodes))
     shares = [episodes // workers + (i < episodes % workers) for i in range(workers)]
     started = time.monotonic()
-    jobs = [(spec, checkpoint, n, seed + 1000 * i) for i, n in enumerate(shares)]
+    jobs = [(spec, checkpoint, n, seed + 1000 * i, scripted_sight) for i, n in enumerate(shares)]
     parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}")
     clean = sum(p["no_infraction"] for p in parts)
     end_reasons: dict[str, int] = {}
     for part in parts:
         for reason, count in part["end_reasons"].items():
             end_reasons[reason] = end_reasons.get(reason, 0) + count
-    summary = {"scenario": spec.name, "episodes": episodes, "no_infraction": clean / episodes,
-               "infraction": 1.0 - clean / episodes, "paper_no_infraction": PAPER_TABLE2.get(spec.name),
-               "agent_end_reasons": end_reasons, "checkpoint": checkpoint, "seed": seed, "workers": workers,
+    rate = clean / episodes
+    summary = {"scenario": spec.name, "episodes": episodes, "no_infraction": rate,
+               "infraction": 1.0 - rate, "no_infraction_stderr": (rate * (1.0 - rate) / episodes) ** 0.5,
+               "paper_no_infraction": PAPER_TABLE2.get(spec.name),
+               "agent_end_reasons": end_reasons, "checkpoint": checkpoint,
+               "scripted_sight": scripted_sight if checkpoint is None else None, "seed": seed, "workers": workers,
                "wall_s": round(time.monotonic() - started, 1), "command": command}
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -145,12 +153,13 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     stem.with_suffix(".json").write_text(json.dumps(summary, indent=2))
     paper = PAPER_TABLE2.get(spec.name)
     stem.with_suffix(".csv").write_text(
-        "scenario,episodes,no_infraction,infraction,paper_no_infraction\n"
+        "scenario,episodes,no_infraction,infraction,no_infraction_stderr,paper_no_infraction\n"
         f"{spec.name},{episodes},{summary['no_infraction']:.4f},{summary['infraction']:.4f},"
-        f"{'' if paper is None else paper}\n")
+        f"{summary['no_infraction_stderr']:.4f},{'' if paper is None else paper}\n")
     table = ("| | ours | paper |\n|---|---|---|\n"
              f"| No infraction | {summary['no_infraction']:.3f} | {'-' if paper is None else f'{paper:.3f}'} |\n"
-             f"| Infraction | {summary['infraction']:.3f} | {'-' if paper is None else f'{1 - paper:.3f}'} |\n")
+             f"| Infraction | {summary['infraction']:.3f} | {'-' if paper is None else f'{1 - paper:.3f}'} |\n"
+             f"| No infraction, standard error | {summary['no_infraction_stderr']:.3f} | - |\n")
     stem.with_suffix(".md").write_text(f"# Right-of-way test (Table II), {spec.name}\n\n{command}\n\n{table}")
     summary["markdown"] = table
     summary["paths"] = [str(stem.with_suffix(x)) for x in (".json", ".csv", ".md")]

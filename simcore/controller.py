@@ -5,8 +5,12 @@ exists so that anyone can watch the simulator, benchmark it and test it without 
 model. It is not the paper's TTC baseline.
 
 Right of way: before a conflict zone it stops while a car with priority (``rightofway``) is in
-that zone or will reach it within ``YIELD_HORIZON_S``; after waiting ``PATIENCE_S`` at a stand
-it goes anyway, which breaks the rare priority cycles (three arms with equal signs).
+that zone or is closer to it than ``YIELD_HORIZON_S`` at that car's target speed (or its current
+speed, if faster). Judging by the target speed rather than the current one matters: a car with
+priority that waits at its own line for a third car is near, not far, and going ahead of it is
+an infraction in the paper's right-of-way test (Table II; ``evaluation.right_of_way``). After
+waiting ``PATIENCE_S`` at a stand it goes anyway, which breaks the rare priority cycles (three
+arms with equal signs).
 
 With ``sight_m`` set it only yields to cars with priority whose centre lies within the square
 of that half-side around it, aligned with its heading: ``view_sight(sim)`` limits it to what a
@@ -32,7 +36,7 @@ from simcore.simulator import Simulator
 from simcore.views import VIEW_EXTENT_M
 
 STOP_MARGIN_M = 2.0  # stop this far before a conflict zone [m]
-YIELD_HORIZON_S = 5.0  # yield to a car with priority that reaches the conflict within this time [s]
+YIELD_HORIZON_S = 5.0  # yield to a car with priority closer to the conflict than this at its target speed [s]
 PATIENCE_S = 4.0  # after standing this long, go [s]
 FOLLOW_GAP_M = 4.0  # bumper-to-bumper gap kept behind a car on a shared lane [m]
 SPEED_GAIN = 1.5  # proportional speed control [1/s]
@@ -121,8 +125,9 @@ class ScriptedDriver:
                 if s_front > zone_start[sim.route[slot], sim.route[other]]:
                     continue  # already in the zone: clear it
                 other_gap = zone_start[sim.route[other], sim.route[slot]] - (sim.s[other] + half)
-                if other_gap > YIELD_HORIZON_S * max(sim.speed[other], 1.0):
-                    continue  # the car with priority is far away
+                # far away, even at its target speed: a car waiting at its line for a third one is near
+                if other_gap > YIELD_HORIZON_S * max(sim.speed[other], sim.target_speed[other]):
+                    continue
                 if gap < 3.0 * speed + 5.0:
                     braking = -speed * speed / (2.0 * gap) if gap > 0.5 else -MAX_ACCELERATION
                     acceleration = min(acceleration, braking)

@@ -104,6 +104,18 @@ def test_right_of_way_scripted_end_to_end(tmp_path):
     assert sum(summary["agent_end_reasons"].values()) == 4 * 3  # every lane's car ended, every episode
     rows = list(csv.DictReader(open(tmp_path / "right-of-way-easy.csv")))
     assert rows[0]["paper_no_infraction"] == "0.985"
+    rate = summary["no_infraction"]
+    assert summary["no_infraction_stderr"] == pytest.approx((rate * (1 - rate) / 4) ** 0.5)
+    assert float(rows[0]["no_infraction_stderr"]) == pytest.approx(summary["no_infraction_stderr"], abs=1e-4)
+    assert summary["scripted_sight"] is None
+
+    limited = crossway("evaluate", "right-of-way", "--scripted", "--scripted-sight", "view", "--scenario", "easy",
+                       "--episodes", "2", "--workers", "1", "--out", str(tmp_path / "view"))
+    assert limited.returncode == 0, limited.stderr
+    assert json.loads((tmp_path / "view" / "right-of-way-easy.json").read_text())["scripted_sight"] == "view"
+    refused = crossway("evaluate", "right-of-way", "--checkpoint", str(tmp_path / "any.pt"), "--scripted-sight", "view",
+                       "--episodes", "2", "--out", str(tmp_path / "refused"))
+    assert refused.returncode != 0 and "--scripted-sight goes with --scripted" in refused.stderr
 
 
 def test_ttc_comparison_end_to_end(tmp_path):

@@ -257,3 +257,14 @@ def test_table1_reach_error_and_per_test_rows():
     assert rows[(10.0, "all")]["episodes"] == 5 and rows[(10.0, "all")]["goal"] == pytest.approx(0.8)
     assert rows[(10.0, "all")]["crash"] == pytest.approx(0.2) and rows[(10.0, "all")]["speed_mps"] == pytest.approx(8.2)
     assert rows[(20.0, "stop")]["time_over"] == 0.5 and rows[(20.0, "stop")]["speed_mps"] == 5.0
+
+
+@pytest.mark.parametrize("scenario, episodes, cars", [("easy", 40, 3), ("medium", 30, 4)])
+def test_the_scripted_driver_keeps_the_right_of_way_in_synchronised_starts(scenario, episodes, cars):
+    # a car with priority that waits at its own line for a third car is near, not far: going ahead
+    # of it is an infraction (the driver's old rule, by current speed, did so in 14% of easy episodes)
+    from evaluation.right_of_way import run_episodes
+
+    result = run_episodes(scenario, None, episodes, seed=0)
+    assert result["infractions_per_episode"] == [0] * episodes
+    assert result["end_reasons"] == {"goal": episodes * cars}  # one car per lane, each reaches its goal

@@ -24,10 +24,7 @@ def add_parser(subparsers) -> None:
                     "episodes, run in parallel worker processes; results per traffic sign averaged over "
                     "the tests.", formatter_class=fmt)
     _add_policy_options(table1, scripted=True, scenario=True)
-    table1.add_argument("--scripted-sight", choices=("full", "view"), default=None,
-                        help="with --scripted: full (default) yields to every car with priority; view only to those "
-                             "inside the square a learner's views show (50 x 50 m around it unless the scenario's "
-                             "[views] say otherwise; the teacher of 'crossway pretrain --teacher-sight view')")
+    _add_scripted_sight(table1)
     table1.add_argument("--scripted-approach-speed", type=float, default=None, metavar="M_PER_S",
                         help="with --scripted: slow to this speed [m/s] before every conflict zone shared with a "
                              "route that would have priority, whether or not a car is there (a driver that expects "
@@ -43,6 +40,7 @@ def add_parser(subparsers) -> None:
                     "crosses it (docs/evaluation.md). Episodes are split over worker processes.",
         formatter_class=fmt)
     _add_policy_options(rules, scripted=True, scenario=True)
+    _add_scripted_sight(rules)
     _add_run_options(rules, episodes=9000, episodes_help="episodes (the paper: 9000)")
     rules.set_defaults(func=run_right_of_way_command)
 
@@ -99,6 +97,13 @@ def _add_policy_options(parser, scripted: bool, scenario: bool) -> None:
         parser.add_argument("--scenario", default="easy", help="easy, medium, hard or a TOML path")
 
 
+def _add_scripted_sight(parser) -> None:
+    parser.add_argument("--scripted-sight", choices=("full", "view"), default=None,
+                        help="with --scripted: full (default) yields to every car with priority; view only to those "
+                             "inside the square a learner's views show (50 x 50 m around it unless the scenario's "
+                             "[views] say otherwise; the teacher of 'crossway pretrain --teacher-sight view')")
+
+
 def _add_run_options(parser, episodes: int, episodes_help: str) -> None:
     parser.add_argument("--episodes", type=int, default=episodes, help=episodes_help)
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes")
@@ -138,8 +143,12 @@ def _command_line() -> str:
 def run_right_of_way_command(args) -> int:
     from evaluation.right_of_way import run_right_of_way
 
-    summary = run_right_of_way(args.scenario, _checked(args), args.episodes, args.workers, args.seed, args.out,
-                               _command_line())
+    checkpoint = _checked(args)
+    if checkpoint is not None and args.scripted_sight is not None:
+        raise ValueError("--scripted-sight goes with --scripted, not with --checkpoint")
+    sight = args.scripted_sight if args.scripted_sight == "view" else None
+    summary = run_right_of_way(args.scenario, checkpoint, args.episodes, args.workers, args.seed, args.out,
+                               _command_line(), scripted_sight=sight)
     print(summary["markdown"], end="")
     print("wrote " + ", ".join(summary["paths"]) + f" in {summary['wall_s']} s")
     return 0
