@@ -68,12 +68,13 @@ PAPER_TABLE2 = {"easy": 0.985, "medium": 0.990, "hard": 0.863}  # "No infraction
 
 
 def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes: int, seed: int,
-                 scripted_sight: str | None = None, progress=None) -> dict:
+                 scripted_sight: str | None = None, scripted_approach_mps: float | None = None,
+                 progress=None) -> dict:
     """Synchronised episodes: every lane starts at once with a random route and sign, all cars at
     the same current and target speed; an episode ends when every car has ended (paper,
     "Testing the Right of Way Rule"). Without a checkpoint the scripted driver drives, seeing
-    every car or (``scripted_sight="view"``) only those inside the learners' views. Runs in a
-    worker process."""
+    every car or (``scripted_sight="view"``) only those inside the learners' views, and slowing
+    to ``scripted_approach_mps`` before conflict zones if given. Runs in a worker process."""
     import torch
 
     from evaluation.policy import PolicyDriver, load_policy
@@ -94,7 +95,8 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
         if policy is not None:
             driver = PolicyDriver(sim, policy)
         else:
-            driver = ScriptedDriver(sim, **(view_sight(sim) if scripted_sight == "view" else {}))
+            sight = view_sight(sim) if scripted_sight == "view" else {}
+            driver = ScriptedDriver(sim, approach_speed_mps=scripted_approach_mps, **sight)
         routes, signs = sim.route[: sim.num_slots].copy(), sim.sign[: sim.num_slots].copy()
         tracks = np.full((sim.num_slots, limit), np.nan)
         tracks[:, 0] = sim.s[: sim.num_slots]
@@ -116,7 +118,8 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
 
 
 def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
-                     out_dir, command: str, scripted_sight: str | None = None) -> dict:
+                     out_dir, command: str, scripted_sight: str | None = None,
+                     scripted_approach_mps: float | None = None) -> dict:
     """The whole test in parallel workers; writes JSON, CSV and Markdown into ``out_dir``."""
     import json
     import time
@@ -133,7 +136,8 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     workers = max(1, min(workers, episodes))
     shares = [episodes // workers + (i < episodes % workers) for i in range(workers)]
     started = time.monotonic()
-    jobs = [(spec, checkpoint, n, seed + 1000 * i, scripted_sight) for i, n in enumerate(shares)]
+    jobs = [(spec, checkpoint, n, seed + 1000 * i, scripted_sight, scripted_approach_mps)
+            for i, n in enumerate(shares)]
     parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}")
     clean = sum(p["no_infraction"] for p in parts)
     end_reasons: dict[str, int] = {}
@@ -145,7 +149,9 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
                "infraction": 1.0 - rate, "no_infraction_stderr": (rate * (1.0 - rate) / episodes) ** 0.5,
                "paper_no_infraction": PAPER_TABLE2.get(spec.name),
                "agent_end_reasons": end_reasons, "checkpoint": checkpoint,
-               "scripted_sight": scripted_sight if checkpoint is None else None, "seed": seed, "workers": workers,
+               "scripted_sight": scripted_sight if checkpoint is None else None,
+               "scripted_approach_mps": scripted_approach_mps if checkpoint is None else None,
+               "seed": seed, "workers": workers,
                "wall_s": round(time.monotonic() - started, 1), "command": command}
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -109,13 +109,14 @@ def test_right_of_way_scripted_end_to_end(tmp_path):
     assert float(rows[0]["no_infraction_stderr"]) == pytest.approx(summary["no_infraction_stderr"], abs=1e-4)
     assert summary["scripted_sight"] is None
 
-    limited = crossway("evaluate", "right-of-way", "--scripted", "--scripted-sight", "view", "--scenario", "easy",
-                       "--episodes", "2", "--workers", "1", "--out", str(tmp_path / "view"))
+    limited = crossway("evaluate", "right-of-way", "--scripted", "--scripted-sight", "view", "--scripted-approach-speed",
+                       "3", "--scenario", "easy", "--episodes", "2", "--workers", "1", "--out", str(tmp_path / "view"))
     assert limited.returncode == 0, limited.stderr
-    assert json.loads((tmp_path / "view" / "right-of-way-easy.json").read_text())["scripted_sight"] == "view"
+    limited_summary = json.loads((tmp_path / "view" / "right-of-way-easy.json").read_text())
+    assert (limited_summary["scripted_sight"], limited_summary["scripted_approach_mps"]) == ("view", 3.0)
     refused = crossway("evaluate", "right-of-way", "--checkpoint", str(tmp_path / "any.pt"), "--scripted-sight", "view",
                        "--episodes", "2", "--out", str(tmp_path / "refused"))
-    assert refused.returncode != 0 and "--scripted-sight goes with --scripted" in refused.stderr
+    assert refused.returncode != 0 and "go with --scripted, not with --checkpoint" in refused.stderr
 
 
 def test_ttc_comparison_end_to_end(tmp_path):

@@ -24,11 +24,7 @@ def add_parser(subparsers) -> None:
                     "episodes, run in parallel worker processes; results per traffic sign averaged over "
                     "the tests.", formatter_class=fmt)
     _add_policy_options(table1, scripted=True, scenario=True)
-    _add_scripted_sight(table1)
-    table1.add_argument("--scripted-approach-speed", type=float, default=None, metavar="M_PER_S",
-                        help="with --scripted: slow to this speed [m/s] before every conflict zone shared with a "
-                             "route that would have priority, whether or not a car is there (a driver that expects "
-                             "cars it cannot see yet); default: no such caution")
+    _add_scripted_options(table1)
     _add_run_options(table1, episodes=3000, episodes_help="episodes per test (the paper: 3000)")
     table1.set_defaults(func=run_table1_command)
 
@@ -40,7 +36,7 @@ def add_parser(subparsers) -> None:
                     "crosses it (docs/evaluation.md). Episodes are split over worker processes.",
         formatter_class=fmt)
     _add_policy_options(rules, scripted=True, scenario=True)
-    _add_scripted_sight(rules)
+    _add_scripted_options(rules)
     _add_run_options(rules, episodes=9000, episodes_help="episodes (the paper: 9000)")
     rules.set_defaults(func=run_right_of_way_command)
 
@@ -97,11 +93,25 @@ def _add_policy_options(parser, scripted: bool, scenario: bool) -> None:
         parser.add_argument("--scenario", default="easy", help="easy, medium, hard or a TOML path")
 
 
-def _add_scripted_sight(parser) -> None:
+def _add_scripted_options(parser) -> None:
     parser.add_argument("--scripted-sight", choices=("full", "view"), default=None,
                         help="with --scripted: full (default) yields to every car with priority; view only to those "
                              "inside the square a learner's views show (50 x 50 m around it unless the scenario's "
                              "[views] say otherwise; the teacher of 'crossway pretrain --teacher-sight view')")
+    parser.add_argument("--scripted-approach-speed", type=float, default=None, metavar="M_PER_S",
+                        help="with --scripted: slow to this speed [m/s] before every conflict zone shared with a "
+                             "route that would have priority, whether or not a car is there (a driver that expects "
+                             "cars it cannot see yet); default: no such caution")
+
+
+def _scripted_options(args, checkpoint: str | None) -> dict:
+    """``scripted_sight`` and ``scripted_approach_mps`` for the evaluation; refuses them with a checkpoint."""
+    if checkpoint is not None and (args.scripted_sight is not None or args.scripted_approach_speed is not None):
+        raise ValueError("--scripted-sight and --scripted-approach-speed go with --scripted, not with --checkpoint")
+    if args.scripted_approach_speed is not None and not args.scripted_approach_speed >= 0:
+        raise ValueError(f"--scripted-approach-speed must be >= 0 m/s, got {args.scripted_approach_speed}")
+    return {"scripted_sight": args.scripted_sight if args.scripted_sight == "view" else None,
+            "scripted_approach_mps": args.scripted_approach_speed}
 
 
 def _add_run_options(parser, episodes: int, episodes_help: str) -> None:
@@ -124,13 +134,8 @@ def run_table1_command(args) -> int:
     from evaluation.table1 import markdown, run_table1
 
     checkpoint = _checked(args)
-    if checkpoint is not None and (args.scripted_sight is not None or args.scripted_approach_speed is not None):
-        raise ValueError("--scripted-sight and --scripted-approach-speed go with --scripted, not with --checkpoint")
-    if args.scripted_approach_speed is not None and not args.scripted_approach_speed >= 0:
-        raise ValueError(f"--scripted-approach-speed must be >= 0 m/s, got {args.scripted_approach_speed}")
     report = run_table1(args.scenario, checkpoint, args.episodes, args.workers, args.seed, args.out,
-                        _command_line(), scripted_sight=args.scripted_sight if args.scripted_sight == "view" else None,
-                        scripted_approach_mps=args.scripted_approach_speed)
+                        _command_line(), **_scripted_options(args, checkpoint))
     print(markdown(report["meta"]["scenario"], report["table"]), end="")
     print("wrote " + ", ".join(str(p) for p in report["paths"]) + f" in {report['meta']['wall_s']} s")
     return 0
@@ -144,11 +149,8 @@ def run_right_of_way_command(args) -> int:
     from evaluation.right_of_way import run_right_of_way
 
     checkpoint = _checked(args)
-    if checkpoint is not None and args.scripted_sight is not None:
-        raise ValueError("--scripted-sight goes with --scripted, not with --checkpoint")
-    sight = args.scripted_sight if args.scripted_sight == "view" else None
     summary = run_right_of_way(args.scenario, checkpoint, args.episodes, args.workers, args.seed, args.out,
-                               _command_line(), scripted_sight=sight)
+                               _command_line(), **_scripted_options(args, checkpoint))
     print(summary["markdown"], end="")
     print("wrote " + ", ".join(summary["paths"]) + f" in {summary['wall_s']} s")
     return 0
