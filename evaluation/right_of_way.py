@@ -13,6 +13,11 @@ agents of one episode whose routes conflict (``PriorityTable.conflict``):
   earlier. If b never enters (it ended before), nobody was wronged: no infraction.
 
 An episode is "no infraction" when no ordered pair has one.
+
+Each infraction is also sorted by what the offender could have known (``seen_in_time``): whether
+the car it wronged could show in its view (the scenario's square) at some step when it
+could still have stopped short of the zone braking at ``MAX_ACCELERATION``. An infraction the
+offender could not have seen in time is one no driver that only reacts to its views avoids.
 """
 
 from __future__ import annotations
@@ -22,8 +27,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simcore.dynamics import VEHICLE_LENGTH
+from simcore.dynamics import MAX_ACCELERATION, VEHICLE_LENGTH
+from simcore.rewards import END_REASON_NAMES, EndReason
 from simcore.rightofway import PriorityTable
+
+CRASH = END_REASON_NAMES[EndReason.CRASH]
 
 if TYPE_CHECKING:
     from simcore.scenario import ScenarioSpec
@@ -62,6 +70,47 @@ def find_infractions(table: PriorityTable, routes: np.ndarray, signs: np.ndarray
     return found
 
 
+@dataclass(frozen=True)
+class Pose:
+    """One car's track through an episode, per step [T]; NaN while it is not on the road."""
+
+    x: np.ndarray  # [m]
+    y: np.ndarray  # [m]
+    heading: np.ndarray  # [rad]
+    s: np.ndarray  # arc length of its centre on its route [m]
+    speed: np.ndarray  # [m/s]
+
+    def until(self, step: int) -> Pose:
+        """The track up to and including ``step``."""
+        return Pose(self.x[: step + 1], self.y[: step + 1], self.heading[: step + 1], self.s[: step + 1],
+                    self.speed[: step + 1])
+
+
+def in_view(ego: Pose, other: Pose, extent_m: float, shift_m: float) -> np.ndarray:
+    """[T] bool: some of ``other``'s body may show in ``ego``'s view square (side ``extent_m``,
+    centre ``shift_m`` ahead of the car, aligned with its heading; paper, "Environment": 50 x 50
+    m): its centre lies within the square grown by half a car length on every side. Generous on
+    purpose: an infraction is excused as unseen only if the car could not have shown at all."""
+    dx, dy = other.x - ego.x, other.y - ego.y
+    cos, sin = np.cos(ego.heading), np.sin(ego.heading)
+    ahead, left = dx * cos + dy * sin, dy * cos - dx * sin
+    reach = 0.5 * extent_m + 0.5 * VEHICLE_LENGTH
+    with np.errstate(invalid="ignore"):
+        return (np.abs(ahead - shift_m) <= reach) & (np.abs(left) <= reach)
+
+
+def seen_in_time(offender: Pose, wronged: Pose, zone_start: float, entry: int, extent_m: float,
+                 shift_m: float, max_braking_mps2: float = MAX_ACCELERATION) -> bool:
+    """Whether ``wronged`` was in ``offender``'s view at some step up to ``entry`` at which the
+    offender could still stop before ``zone_start`` (its front's room >= v^2 / (2 b), b =
+    ``max_braking_mps2``): the infraction was avoidable by a driver of those views."""
+    offender, wronged = offender.until(entry), wronged.until(entry)
+    room = zone_start - (offender.s + 0.5 * VEHICLE_LENGTH)
+    with np.errstate(invalid="ignore"):
+        could_stop = room >= offender.speed ** 2 / (2.0 * max_braking_mps2)
+    return bool(np.any(could_stop & in_view(offender, wronged, extent_m, shift_m)))
+
+
 # -- the test itself ---------------------------------------------------------------------------------
 
 PAPER_TABLE2 = {"easy": 0.985, "medium": 0.990, "hard": 0.863}  # "No infraction" fractions (Table II)
@@ -86,7 +135,8 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
                        equal_speeds=True, observe=checkpoint is not None)
     sim = Simulator(scenario, config, seed=seed)
     policy = load_policy(checkpoint) if checkpoint is not None else None
-    clean = 0
+    clean = clean_of_seen = 0  # episodes without infractions / without any the offender saw in time
+    anatomy = {"seen_in_time": 0, "offender_crashed": 0}  # infractions by kind
     infraction_counts = []
     end_reasons: dict[str, int] = {}
     limit = int(sim.time_limit_s / 0.1) + 2
@@ -97,24 +147,37 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
         else:
             sight = view_sight(sim) if scripted_sight == "view" else {}
             driver = ScriptedDriver(sim, approach_speed_mps=scripted_approach_mps, **sight)
-        routes, signs = sim.route[: sim.num_slots].copy(), sim.sign[: sim.num_slots].copy()
-        tracks = np.full((sim.num_slots, limit), np.nan)
-        tracks[:, 0] = sim.s[: sim.num_slots]
+        n = sim.num_slots
+        routes, signs = sim.route[:n].copy(), sim.sign[:n].copy()
+        # per step: x, y, heading, s, speed of every agent (NaN once it has ended)
+        tracks = np.full((5, n, limit), np.nan)
+        tracks[:, :, 0] = sim.x[:n], sim.y[:n], sim.heading[:n], sim.s[:n], sim.speed[:n]
+        crashed = np.zeros(n, bool)
         step = 0
         while sim.learners_present.any() and step + 1 < limit:
             result = sim.step(driver.act(result) if policy is not None else driver.act())
             step += 1
             acted = result.acted
-            tracks[acted, step] = sim.s[: sim.num_slots][acted]
+            for row, values in enumerate((sim.x, sim.y, sim.heading, sim.s, sim.speed)):
+                tracks[row, acted, step] = values[:n][acted]
             for summary in result.episodes:
                 end_reasons[summary.end_reason] = end_reasons.get(summary.end_reason, 0) + 1
-        found = find_infractions(sim.priority, routes, signs, tracks[:, : step + 1])
+                crashed[summary.slot] |= summary.end_reason == CRASH
+        tracks = tracks[:, :, : step + 1]
+        found = find_infractions(sim.priority, routes, signs, tracks[3])
+        poses = [Pose(*tracks[:, car]) for car in range(n)]
+        seen = [seen_in_time(poses[f.offender], poses[f.wronged],
+                             sim.priority.zone_start[routes[f.offender], routes[f.wronged]], f.offender_entry_step,
+                             sim.spec.views.extent_m, sim.spec.views.shift_m) for f in found]
         infraction_counts.append(len(found))
+        anatomy["seen_in_time"] += sum(seen)
+        anatomy["offender_crashed"] += sum(bool(crashed[f.offender]) for f in found)
         clean += not found
+        clean_of_seen += not any(seen)
         if progress is not None:
             progress.put(1)
-    return {"episodes": episodes, "no_infraction": clean, "infractions_per_episode": infraction_counts,
-            "end_reasons": end_reasons}
+    return {"episodes": episodes, "no_infraction": clean, "no_seen_infraction": clean_of_seen,
+            "infractions_per_episode": infraction_counts, "anatomy": anatomy, "end_reasons": end_reasons}
 
 
 def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
@@ -140,6 +203,8 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
             for i, n in enumerate(shares)]
     parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}")
     clean = sum(p["no_infraction"] for p in parts)
+    clean_of_seen = sum(p["no_seen_infraction"] for p in parts)
+    infractions = sum(sum(p["infractions_per_episode"]) for p in parts)
     end_reasons: dict[str, int] = {}
     for part in parts:
         for reason, count in part["end_reasons"].items():
@@ -148,6 +213,12 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     summary = {"scenario": spec.name, "episodes": episodes, "no_infraction": rate,
                "infraction": 1.0 - rate, "no_infraction_stderr": (rate * (1.0 - rate) / episodes) ** 0.5,
                "paper_no_infraction": PAPER_TABLE2.get(spec.name),
+               # the same test excusing infractions against a car the offender could not see in time
+               "no_seen_infraction": clean_of_seen / episodes,
+               "infractions": infractions,
+               "infractions_seen_in_time": sum(p["anatomy"]["seen_in_time"] for p in parts),
+               "infractions_offender_crashed": sum(p["anatomy"]["offender_crashed"] for p in parts),
+               "view_extent_m": spec.views.extent_m, "view_shift_m": spec.views.shift_m,
                "agent_end_reasons": end_reasons, "checkpoint": checkpoint,
                "scripted_sight": scripted_sight if checkpoint is None else None,
                "scripted_approach_mps": scripted_approach_mps if checkpoint is None else None,
@@ -159,13 +230,18 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     stem.with_suffix(".json").write_text(json.dumps(summary, indent=2))
     paper = PAPER_TABLE2.get(spec.name)
     stem.with_suffix(".csv").write_text(
-        "scenario,episodes,no_infraction,infraction,no_infraction_stderr,paper_no_infraction\n"
+        "scenario,episodes,no_infraction,infraction,no_infraction_stderr,paper_no_infraction,no_seen_infraction,"
+        "infractions,infractions_seen_in_time,infractions_offender_crashed\n"
         f"{spec.name},{episodes},{summary['no_infraction']:.4f},{summary['infraction']:.4f},"
-        f"{summary['no_infraction_stderr']:.4f},{'' if paper is None else paper}\n")
+        f"{summary['no_infraction_stderr']:.4f},{'' if paper is None else paper},{summary['no_seen_infraction']:.4f},"
+        f"{infractions},{summary['infractions_seen_in_time']},{summary['infractions_offender_crashed']}\n")
     table = ("| | ours | paper |\n|---|---|---|\n"
              f"| No infraction | {summary['no_infraction']:.3f} | {'-' if paper is None else f'{paper:.3f}'} |\n"
              f"| Infraction | {summary['infraction']:.3f} | {'-' if paper is None else f'{1 - paper:.3f}'} |\n"
-             f"| No infraction, standard error | {summary['no_infraction_stderr']:.3f} | - |\n")
+             f"| No infraction, standard error | {summary['no_infraction_stderr']:.3f} | - |\n"
+             f"| No infraction the offender saw in time | {summary['no_seen_infraction']:.3f} | - |\n"
+             f"| Infractions (all episodes): seen in time / offender crashed / all "
+             f"| {summary['infractions_seen_in_time']} / {summary['infractions_offender_crashed']} / {infractions} | - |\n")
     stem.with_suffix(".md").write_text(f"# Right-of-way test (Table II), {spec.name}\n\n{command}\n\n{table}")
     summary["markdown"] = table
     summary["paths"] = [str(stem.with_suffix(x)) for x in (".json", ".csv", ".md")]

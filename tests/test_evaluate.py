@@ -108,12 +108,20 @@ def test_right_of_way_scripted_end_to_end(tmp_path):
     assert summary["no_infraction_stderr"] == pytest.approx((rate * (1 - rate) / 4) ** 0.5)
     assert float(rows[0]["no_infraction_stderr"]) == pytest.approx(summary["no_infraction_stderr"], abs=1e-4)
     assert summary["scripted_sight"] is None
+    assert "| No infraction the offender saw in time |" in result.stdout
+    assert {"no_seen_infraction", "infractions", "infractions_seen_in_time", "infractions_offender_crashed"} <= set(rows[0])
 
     limited = crossway("evaluate", "right-of-way", "--scripted", "--scripted-sight", "view", "--scripted-approach-speed",
                        "3", "--scenario", "easy", "--episodes", "2", "--workers", "1", "--out", str(tmp_path / "view"))
     assert limited.returncode == 0, limited.stderr
     limited_summary = json.loads((tmp_path / "view" / "right-of-way-easy.json").read_text())
     assert (limited_summary["scripted_sight"], limited_summary["scripted_approach_mps"]) == ("view", 3.0)
+    for run in (summary, limited_summary):  # the anatomy adds up
+        assert 0 <= run["infractions_seen_in_time"] <= run["infractions"]
+        assert 0 <= run["infractions_offender_crashed"] <= run["infractions"]
+        assert run["no_infraction"] <= run["no_seen_infraction"] <= 1.0
+        assert (run["infractions"] == 0) == (run["no_infraction"] == 1.0)
+        assert (run["view_extent_m"], run["view_shift_m"]) == (50.0, 0.0)
     refused = crossway("evaluate", "right-of-way", "--checkpoint", str(tmp_path / "any.pt"), "--scripted-sight", "view",
                        "--episodes", "2", "--out", str(tmp_path / "refused"))
     assert refused.returncode != 0 and "go with --scripted, not with --checkpoint" in refused.stderr

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from evaluation.right_of_way import entry_step, find_infractions
+from evaluation.right_of_way import Pose, entry_step, find_infractions, in_view, seen_in_time
 from evaluation.ttc import lowest_ttc, time_to_axis
 from simcore.dynamics import VEHICLE_LENGTH
 from simcore.idm import IDMParameters, equilibrium_gap, idm_acceleration
@@ -128,6 +128,46 @@ def test_equal_signs_use_priority_to_the_right(medium):
     tracks = np.stack([track(table.zone_start[south, east], 10), track(table.zone_start[east, south], 20)])
     found = find_infractions(table, np.array([south, east]), np.array([Sign.YIELD, Sign.YIELD]), tracks)
     assert [(f.offender, f.wronged) for f in found] == [(0, 1)]
+
+
+def straight_pose(start_xy, heading_rad, speed_mps, steps, dt=0.1, start_s=0.0):
+    """A car driving straight at constant speed; s counts from ``start_s``."""
+    travelled = speed_mps * dt * np.arange(steps)
+    return Pose(start_xy[0] + np.cos(heading_rad) * travelled, start_xy[1] + np.sin(heading_rad) * travelled,
+                np.full(steps, heading_rad), start_s + travelled, np.full(steps, speed_mps))
+
+
+def test_in_view_is_the_heading_aligned_square_grown_by_half_a_car():
+    ego = straight_pose((0.0, 0.0), math.pi / 2, 0.0, 1)  # at the origin, heading north
+    reach = 25.0 + 0.5 * VEHICLE_LENGTH
+    for (x, y), visible in [((0.0, reach - 0.1), True), ((0.0, reach + 0.1), False), ((-reach + 0.1, 0.0), True),
+                            ((reach + 0.1, 0.0), False), ((reach - 0.1, -(reach - 0.1)), True)]:
+        other = straight_pose((x, y), 0.0, 0.0, 1)
+        assert bool(in_view(ego, other, 50.0, 0.0)[0]) is visible, (x, y)
+    shifted = straight_pose((0.0, reach + 10.0), 0.0, 0.0, 1)  # 10 m past the front edge
+    assert not in_view(ego, shifted, 50.0, 0.0)[0] and in_view(ego, shifted, 50.0, 15.0)[0]
+
+
+def test_an_infraction_against_a_car_seen_early_was_avoidable():
+    """Ego northbound at 8 m/s, zone 40 m ahead; the car with priority sits 20 m to its right:
+    in view from the start, with 40 m of room against 10.7 m of braking distance at 3 m/s^2."""
+    ego = straight_pose((0.0, 0.0), math.pi / 2, 8.0, 60)
+    other = straight_pose((20.0, 30.0), math.pi, 0.0, 60)
+    assert seen_in_time(ego, other, zone_start=40.0, entry=55, extent_m=50.0, shift_m=0.0)
+
+
+def test_an_infraction_against_a_car_that_shows_too_late_was_not():
+    """The same ego; the car with priority comes from the east at 10 m/s towards x = 0 and shows
+    only when it is 27.25 m away sideways, 3.6 s in: by then the ego, 28.8 m on, cannot stop before the zone."""
+    ego = straight_pose((0.0, 0.0), math.pi / 2, 8.0, 50)
+    other = straight_pose((63.25, 30.0), math.pi, 10.0, 50)
+    first_seen = int(np.flatnonzero(in_view(ego, other, 50.0, 0.0))[0])
+    room = 40.0 - (ego.s[first_seen] + 0.5 * VEHICLE_LENGTH)
+    assert room < 8.0 ** 2 / (2 * 3.0)  # the premise: seen, but already inside its braking distance
+    assert not seen_in_time(ego, other, zone_start=40.0, entry=47, extent_m=50.0, shift_m=0.0)
+    # a slower ego with the same geometry could have stopped: seen in time
+    slow = straight_pose((0.0, 0.0), math.pi / 2, 2.0, 50)
+    assert seen_in_time(slow, other, zone_start=40.0, entry=47, extent_m=50.0, shift_m=0.0)
 
 
 def test_entry_step():
