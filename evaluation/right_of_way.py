@@ -30,6 +30,7 @@ import numpy as np
 from simcore.dynamics import MAX_ACCELERATION, VEHICLE_LENGTH
 from simcore.rewards import END_REASON_NAMES, EndReason
 from simcore.rightofway import PriorityTable
+from simcore.views import may_show
 
 CRASH = END_REASON_NAMES[EndReason.CRASH]
 
@@ -88,15 +89,9 @@ class Pose:
 
 def in_view(ego: Pose, other: Pose, extent_m: float, shift_m: float) -> np.ndarray:
     """[T] bool: some of ``other``'s body may show in ``ego``'s view square (side ``extent_m``,
-    centre ``shift_m`` ahead of the car, aligned with its heading; paper, "Environment": 50 x 50
-    m): its centre lies within the square grown by half a car length on every side. Generous on
-    purpose: an infraction is excused as unseen only if the car could not have shown at all."""
-    dx, dy = other.x - ego.x, other.y - ego.y
-    cos, sin = np.cos(ego.heading), np.sin(ego.heading)
-    ahead, left = dx * cos + dy * sin, dy * cos - dx * sin
-    reach = 0.5 * extent_m + 0.5 * VEHICLE_LENGTH
-    with np.errstate(invalid="ignore"):
-        return (np.abs(ahead - shift_m) <= reach) & (np.abs(left) <= reach)
+    centre ``shift_m`` ahead of the car; paper, "Environment": 50 x 50 m; ``simcore.views.may_show``).
+    Generous on purpose: an infraction is excused as unseen only if the car could not show at all."""
+    return may_show(ego.x, ego.y, ego.heading, other.x, other.y, extent_m, shift_m)
 
 
 def seen_in_time(offender: Pose, wronged: Pose, zone_start: float, entry: int, extent_m: float,

@@ -12,9 +12,11 @@ an infraction in the paper's right-of-way test (Table II; ``evaluation.right_of_
 waiting ``PATIENCE_S`` at a stand it goes anyway, which breaks the rare priority cycles (three
 arms with equal signs).
 
-With ``sight_m`` set it only yields to cars with priority whose centre lies within the square
-of that half-side around it, aligned with its heading: ``view_sight(sim)`` limits it to what a
-learner's views show (``crossway pretrain --teacher-sight view``). ``sight_shift_m`` moves that
+With ``sight_m`` set it only yields to cars with priority that may show in the square of that
+half-side around it, aligned with its heading (their centre within half a car length of it;
+before session 12 the centre had to be inside, so it ignored cars a learner sees part of):
+``view_sight(sim)`` limits it to what a learner's views show (``crossway pretrain
+--teacher-sight view``). ``sight_shift_m`` moves that
 square's centre ahead of the car (a what-if for views placed further forward).
 
 With ``approach_speed_mps`` set it also drives as if a car with priority could appear at any
@@ -33,7 +35,7 @@ import numpy as np
 from simcore.dynamics import DT, MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
 from simcore.rightofway import SIGN_RANK
 from simcore.simulator import Simulator
-from simcore.views import VIEW_EXTENT_M
+from simcore.views import VIEW_EXTENT_M, may_show
 
 STOP_MARGIN_M = 2.0  # stop this far before a conflict zone [m]
 YIELD_HORIZON_S = 5.0  # yield to a car with priority closer to the conflict than this at its target speed [s]
@@ -150,11 +152,10 @@ class ScriptedDriver:
         return table.zone_start[route][may_yield]
 
     def _in_sight(self, idx: np.ndarray) -> np.ndarray:
-        """``out[a, b]``: car ``idx[b]``'s centre lies in the square of half-side ``sight_m`` centred
-        ``sight_shift_m`` ahead of car ``idx[a]``, aligned with ``idx[a]``'s heading."""
+        """``out[a, b]``: car ``idx[b]`` may show in the square of half-side ``sight_m`` centred
+        ``sight_shift_m`` ahead of car ``idx[a]`` and aligned with its heading: some of its body
+        can be inside (``simcore.views.may_show``), as a learner's view shows part of a car."""
         sim = self.sim
-        dx = sim.x[idx][None, :] - sim.x[idx][:, None]
-        dy = sim.y[idx][None, :] - sim.y[idx][:, None]
-        cos, sin = np.cos(sim.heading[idx])[:, None], np.sin(sim.heading[idx])[:, None]
-        ahead, left = dx * cos + dy * sin, dy * cos - dx * sin
-        return (np.abs(ahead - self.sight_shift_m) <= self.sight_m) & (np.abs(left) <= self.sight_m)
+        ego = idx[:, None]
+        return may_show(sim.x[ego], sim.y[ego], sim.heading[ego], sim.x[idx][None, :], sim.y[idx][None, :],
+                        2.0 * self.sight_m, self.sight_shift_m)

@@ -48,6 +48,20 @@ YIELD_LINE = 255  # the paper's white sign line
 SIGN_CODES = {Sign.NONE: 0, Sign.YIELD: YIELD_LINE, Sign.STOP: STOP_LINE}
 
 
+def may_show(ego_x, ego_y, ego_heading, x, y, extent_m: float = VIEW_EXTENT_M, shift_m: float = 0.0) -> np.ndarray:
+    """Whether a car whose centre is at (``x``, ``y``) may show in the view of a car at
+    (``ego_x``, ``ego_y``) heading ``ego_heading`` [rad]: its centre lies within the view's square
+    (side ``extent_m``, centre ``shift_m`` ahead of the ego, aligned with its heading) grown by half
+    a car length on every side, so some of its body can be in the picture. Arrays broadcast; NaN
+    positions give False."""
+    dx, dy = np.asarray(x) - ego_x, np.asarray(y) - ego_y
+    cos, sin = np.cos(ego_heading), np.sin(ego_heading)
+    ahead, left = dx * cos + dy * sin, dy * cos - dx * sin
+    reach = 0.5 * extent_m + 0.5 * VEHICLE_LENGTH
+    with np.errstate(invalid="ignore"):
+        return (np.abs(ahead - shift_m) <= reach) & (np.abs(left) <= reach)
+
+
 def _unit(angle_deg: float) -> np.ndarray:
     a = math.radians(angle_deg)
     return np.array([math.cos(a), math.sin(a)])

@@ -65,3 +65,13 @@ def test_brake_learnability_scores_both_sets_after_every_epoch():
             assert scores["mse_acc"] >= 0.0
     # the training set is the one learnt from: its error falls
     assert report["epochs"][1]["train"]["mse_acc"] < report["epochs"][0]["train"]["mse_acc"]
+
+
+def test_row_seen_in_time_sorts_every_infraction():
+    result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/row_seen_in_time.py"), "--episodes", "12"],
+                            capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert (report["scenario"], report["episodes"]) == ("easy", 12)
+    assert 0 <= report["seen_in_time_by_centre"] <= report["seen_in_time"] <= report["infractions"]
+    assert report["infractions"] > 0  # the view-limited driver commits some in 12 synchronised easy starts

@@ -236,6 +236,8 @@ def test_same_seed_same_run_different_seed_different_run():
 @pytest.mark.parametrize("priority_car_before_zone_m, view_sight_yields", [
     (12.0, True),  # near: 15 m to the right, 15 m ahead, inside the 50 x 50 m the learner's views show
     (34.0, False),  # 34 m out at 8 m/s it reaches the zone within 5 s, but lies 37 m to the right
+    (23.0, True),  # 26 m to the right: its centre is 1 m outside the square, its front inside it
+    (25.0, False),  # 28 m to the right: more than half a car length (2.25 m) outside, none of it shows
 ])
 def test_a_teacher_with_the_views_sight_yields_only_to_cars_it_could_see(
         medium_road, priority_car_before_zone_m, view_sight_yields):
