@@ -17,7 +17,8 @@ An episode is "no infraction" when no ordered pair has one.
 Each infraction is also sorted by what the offender could have known (``seen_in_time``): whether
 the car it wronged could show in its view (the scenario's square) at some step when it
 could still have stopped short of the zone braking at ``MAX_ACCELERATION``. An infraction the
-offender could not have seen in time is one no driver that only reacts to its views avoids.
+offender could not have seen in time could not have been avoided, at the speeds it drove, by
+reacting to its views; only slowing down before anything showed would have.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simcore.dynamics import MAX_ACCELERATION, VEHICLE_LENGTH
+from simcore.dynamics import DT, MAX_ACCELERATION, VEHICLE_LENGTH
 from simcore.rewards import END_REASON_NAMES, EndReason
 from simcore.rightofway import PriorityTable
 from simcore.views import may_show
@@ -36,6 +37,7 @@ CRASH = END_REASON_NAMES[EndReason.CRASH]
 
 if TYPE_CHECKING:
     from simcore.scenario import ScenarioSpec
+    from simcore.simulator import SimConfig, Simulator
 
 
 @dataclass(frozen=True)
@@ -106,6 +108,61 @@ def seen_in_time(offender: Pose, wronged: Pose, zone_start: float, entry: int, e
     return bool(np.any(could_stop & in_view(offender, wronged, extent_m, shift_m)))
 
 
+@dataclass(frozen=True)
+class SynchronisedEpisode:
+    """What one right-of-way episode leaves to judge: every agent's route, sign, track and end."""
+
+    sim: Simulator  # the simulator it ran in (its priority table and views)
+    routes: np.ndarray  # [N]
+    signs: np.ndarray  # [N]
+    tracks: np.ndarray  # [5, N, T]: x, y, heading, s, speed per agent and step (NaN once ended)
+    end_reasons: list[str]  # [N]; "" for a car still driving when the time limit stopped the episode
+
+    def pose(self, agent: int) -> Pose:
+        return Pose(*self.tracks[:, agent])
+
+    def infractions(self) -> list[Infraction]:
+        return find_infractions(self.sim.priority, self.routes, self.signs, self.tracks[3])
+
+    def seen_in_time(self, infraction: Infraction, extent_m: float | None = None) -> bool:
+        """``seen_in_time`` for one infraction, in the scenario's view (or a square of side ``extent_m``)."""
+        views = self.sim.spec.views
+        zone = self.sim.priority.zone_start[self.routes[infraction.offender], self.routes[infraction.wronged]]
+        return seen_in_time(self.pose(infraction.offender), self.pose(infraction.wronged), zone,
+                            infraction.offender_entry_step, views.extent_m if extent_m is None else extent_m,
+                            views.shift_m)
+
+
+def synchronised_config(observe: bool) -> SimConfig:
+    """The test's simulator options: every lane starts at once, with one shared current and one
+    shared target speed, nobody starts again, signs stay as drawn (paper, "Testing the Right of
+    Way Rule"); ``observe`` renders the views a policy needs."""
+    from simcore.simulator import SimConfig
+
+    return SimConfig(start_all_at_reset=True, delay_min_s=1e9, delay_max_s=1e9, sign_change_interval_s=0.0,
+                     equal_speeds=True, observe=observe)
+
+
+def drive_episode(sim: Simulator, act, result) -> SynchronisedEpisode:
+    """Drive ``sim``, just reset (``result`` from ``reset()``), until every agent has ended or the
+    time limit; ``act(result)`` gives the actions of each step."""
+    n = sim.num_slots
+    limit = int(sim.time_limit_s / DT) + 2
+    routes, signs = sim.route[:n].copy(), sim.sign[:n].copy()
+    tracks = np.full((5, n, limit), np.nan)
+    tracks[:, :, 0] = sim.x[:n], sim.y[:n], sim.heading[:n], sim.s[:n], sim.speed[:n]
+    end_reasons = [""] * n
+    step = 0
+    while sim.learners_present.any() and step + 1 < limit:
+        result = sim.step(act(result))
+        step += 1
+        for row, values in enumerate((sim.x, sim.y, sim.heading, sim.s, sim.speed)):
+            tracks[row, result.acted, step] = values[:n][result.acted]
+        for summary in result.episodes:
+            end_reasons[summary.slot] = summary.end_reason
+    return SynchronisedEpisode(sim, routes, signs, tracks[:, :, : step + 1], end_reasons)
+
+
 # -- the test itself ---------------------------------------------------------------------------------
 
 PAPER_TABLE2 = {"easy": 0.985, "medium": 0.990, "hard": 0.863}  # "No infraction" fractions (Table II)
@@ -123,50 +180,30 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
 
     from evaluation.policy import PolicyDriver, load_policy
     from simcore.controller import ScriptedDriver, view_sight
-    from simcore.simulator import SimConfig, Simulator
+    from simcore.simulator import Simulator
 
     torch.set_num_threads(1)
-    config = SimConfig(start_all_at_reset=True, delay_min_s=1e9, delay_max_s=1e9, sign_change_interval_s=0.0,
-                       equal_speeds=True, observe=checkpoint is not None)
-    sim = Simulator(scenario, config, seed=seed)
+    sim = Simulator(scenario, synchronised_config(observe=checkpoint is not None), seed=seed)
     policy = load_policy(checkpoint) if checkpoint is not None else None
     clean = clean_of_seen = 0  # episodes without infractions / without any the offender saw in time
     anatomy = {"seen_in_time": 0, "offender_crashed": 0}  # infractions by kind
     infraction_counts = []
     end_reasons: dict[str, int] = {}
-    limit = int(sim.time_limit_s / 0.1) + 2
-    for episode in range(episodes):
+    for _ in range(episodes):
         result = sim.reset()
         if policy is not None:
             driver = PolicyDriver(sim, policy)
         else:
             sight = view_sight(sim) if scripted_sight == "view" else {}
             driver = ScriptedDriver(sim, approach_speed_mps=scripted_approach_mps, **sight)
-        n = sim.num_slots
-        routes, signs = sim.route[:n].copy(), sim.sign[:n].copy()
-        # per step: x, y, heading, s, speed of every agent (NaN once it has ended)
-        tracks = np.full((5, n, limit), np.nan)
-        tracks[:, :, 0] = sim.x[:n], sim.y[:n], sim.heading[:n], sim.s[:n], sim.speed[:n]
-        crashed = np.zeros(n, bool)
-        step = 0
-        while sim.learners_present.any() and step + 1 < limit:
-            result = sim.step(driver.act(result) if policy is not None else driver.act())
-            step += 1
-            acted = result.acted
-            for row, values in enumerate((sim.x, sim.y, sim.heading, sim.s, sim.speed)):
-                tracks[row, acted, step] = values[:n][acted]
-            for summary in result.episodes:
-                end_reasons[summary.end_reason] = end_reasons.get(summary.end_reason, 0) + 1
-                crashed[summary.slot] |= summary.end_reason == CRASH
-        tracks = tracks[:, :, : step + 1]
-        found = find_infractions(sim.priority, routes, signs, tracks[3])
-        poses = [Pose(*tracks[:, car]) for car in range(n)]
-        seen = [seen_in_time(poses[f.offender], poses[f.wronged],
-                             sim.priority.zone_start[routes[f.offender], routes[f.wronged]], f.offender_entry_step,
-                             sim.spec.views.extent_m, sim.spec.views.shift_m) for f in found]
+        episode = drive_episode(sim, lambda r: driver.act(r) if policy is not None else driver.act(), result)
+        for reason in filter(None, episode.end_reasons):  # "" for a car still driving at the time limit
+            end_reasons[reason] = end_reasons.get(reason, 0) + 1
+        found = episode.infractions()
+        seen = [episode.seen_in_time(f) for f in found]
         infraction_counts.append(len(found))
         anatomy["seen_in_time"] += sum(seen)
-        anatomy["offender_crashed"] += sum(bool(crashed[f.offender]) for f in found)
+        anatomy["offender_crashed"] += sum(episode.end_reasons[f.offender] == CRASH for f in found)
         clean += not found
         clean_of_seen += not any(seen)
         if progress is not None:

@@ -17,12 +17,10 @@ from __future__ import annotations
 import argparse
 import json
 
-import numpy as np
-
-from evaluation.right_of_way import Pose, find_infractions, seen_in_time
+from evaluation.right_of_way import drive_episode, synchronised_config
 from simcore.controller import ScriptedDriver, view_sight
-from simcore.dynamics import DT, VEHICLE_LENGTH
-from simcore.simulator import SimConfig, Simulator
+from simcore.dynamics import VEHICLE_LENGTH
+from simcore.simulator import Simulator
 
 
 def main() -> None:
@@ -31,35 +29,18 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=300)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    config = SimConfig(start_all_at_reset=True, delay_min_s=1e9, delay_max_s=1e9, sign_change_interval_s=0.0,
-                       equal_speeds=True, observe=False)
-    sim = Simulator(args.scenario, config, seed=args.seed)
-    limit = int(sim.time_limit_s / DT) + 2
-    extent, shift = sim.spec.views.extent_m, sim.spec.views.shift_m
+    sim = Simulator(args.scenario, synchronised_config(observe=False), seed=args.seed)
     counts = {"infractions": 0, "seen_in_time": 0, "seen_in_time_by_centre": 0}
     for _ in range(args.episodes):
-        sim.reset()
+        result = sim.reset()
         driver = ScriptedDriver(sim, **view_sight(sim))
-        n = sim.num_slots
-        routes, signs = sim.route[:n].copy(), sim.sign[:n].copy()
-        tracks = np.full((5, n, limit), np.nan)
-        tracks[:, :, 0] = sim.x[:n], sim.y[:n], sim.heading[:n], sim.s[:n], sim.speed[:n]
-        step = 0
-        while sim.learners_present.any() and step + 1 < limit:
-            result = sim.step(driver.act())
-            step += 1
-            for row, values in enumerate((sim.x, sim.y, sim.heading, sim.s, sim.speed)):
-                tracks[row, result.acted, step] = values[:n][result.acted]
-        tracks = tracks[:, :, : step + 1]
-        for found in find_infractions(sim.priority, routes, signs, tracks[3]):
-            offender, wronged = Pose(*tracks[:, found.offender]), Pose(*tracks[:, found.wronged])
-            zone = sim.priority.zone_start[routes[found.offender], routes[found.wronged]]
+        episode = drive_episode(sim, lambda _: driver.act(), result)
+        for found in episode.infractions():
             counts["infractions"] += 1
-            if seen_in_time(offender, wronged, zone, found.offender_entry_step, extent, shift):
+            if episode.seen_in_time(found):
                 counts["seen_in_time"] += 1
-                # the driver's own criterion: the centre inside the square (shrink the grown square back)
-                counts["seen_in_time_by_centre"] += seen_in_time(offender, wronged, zone, found.offender_entry_step,
-                                                                 extent - VEHICLE_LENGTH, shift)
+                # the driver's old criterion: the centre inside the square (shrink the grown square back)
+                counts["seen_in_time_by_centre"] += episode.seen_in_time(found, sim.spec.views.extent_m - VEHICLE_LENGTH)
     print(json.dumps({"scenario": sim.spec.name, "episodes": args.episodes, "seed": args.seed, **counts}))
 
 
