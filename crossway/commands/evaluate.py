@@ -33,7 +33,10 @@ def add_parser(subparsers) -> None:
         description="The paper's right-of-way test: every lane starts at once with a random route and sign, all "
                     "cars at the same current and target speed; an episode ends when every car has ended. An "
                     "infraction is a car entering a conflict area before a car with priority over it that also "
-                    "crosses it (docs/evaluation.md). Episodes are split over worker processes.",
+                    "crosses it (docs/evaluation.md). Each infraction is also sorted by whether the car wronged "
+                    "could show in the offender's view while the offender could still stop at 3 m/s^2: "
+                    "'no_seen_infraction' excuses those it could not have seen. Episodes are split over worker "
+                    "processes.",
         formatter_class=fmt)
     _add_policy_options(rules, scripted=True, scenario=True)
     _add_scripted_options(rules)
@@ -96,7 +99,7 @@ def _add_policy_options(parser, scripted: bool, scenario: bool) -> None:
 def _add_scripted_options(parser) -> None:
     parser.add_argument("--scripted-sight", choices=("full", "view"), default=None,
                         help="with --scripted: full (default) yields to every car with priority; view only to those "
-                             "inside the square a learner's views show (50 x 50 m around it unless the scenario's "
+                             "that may show in the square a learner's views show (50 x 50 m around it unless the scenario's "
                              "[views] say otherwise; the teacher of 'crossway pretrain --teacher-sight view')")
     parser.add_argument("--scripted-approach-speed", type=float, default=None, metavar="M_PER_S",
                         help="with --scripted: slow to this speed [m/s] before every conflict zone shared with a "
