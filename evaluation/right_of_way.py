@@ -98,7 +98,7 @@ def in_view(ego: Pose, other: Pose, extent_m: float, shift_m: float) -> np.ndarr
 
 def seen_in_time(offender: Pose, wronged: Pose, zone_start: float, entry: int, extent_m: float,
                  shift_m: float, max_braking_mps2: float = MAX_ACCELERATION) -> bool:
-    """Whether ``wronged`` was in ``offender``'s view at some step up to ``entry`` at which the
+    """Whether ``wronged`` may show in ``offender``'s view at some step up to ``entry`` at which the
     offender could still stop before ``zone_start`` (its front's room >= v^2 / (2 b), b =
     ``max_braking_mps2``): the infraction was avoidable by a driver of those views."""
     offender, wronged = offender.until(entry), wronged.until(entry)
@@ -272,8 +272,9 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
              f"| Infraction | {summary['infraction']:.3f} | {'-' if paper is None else f'{1 - paper:.3f}'} |\n"
              f"| No infraction, standard error | {summary['no_infraction_stderr']:.3f} | - |\n"
              f"| No infraction the offender saw in time | {summary['no_seen_infraction']:.3f} | - |\n"
-             f"| Infractions (all episodes): seen in time / offender crashed / all "
-             f"| {summary['infractions_seen_in_time']} / {summary['infractions_offender_crashed']} / {infractions} | - |\n")
+             f"| Infractions (all episodes): seen in time / offender crashed / all | "
+             f"{summary['infractions_seen_in_time']} / {summary['infractions_offender_crashed']} / {infractions}"
+             " | - |\n")
     stem.with_suffix(".md").write_text(f"# Right-of-way test (Table II), {spec.name}\n\n{command}\n\n{table}")
     summary["markdown"] = table
     summary["paths"] = [str(stem.with_suffix(x)) for x in (".json", ".csv", ".md")]

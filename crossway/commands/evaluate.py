@@ -99,8 +99,9 @@ def _add_policy_options(parser, scripted: bool, scenario: bool) -> None:
 def _add_scripted_options(parser) -> None:
     parser.add_argument("--scripted-sight", choices=("full", "view"), default=None,
                         help="with --scripted: full (default) yields to every car with priority; view only to those "
-                             "that may show in the square a learner's views show (50 x 50 m around it unless the scenario's "
-                             "[views] say otherwise; the teacher of 'crossway pretrain --teacher-sight view')")
+                             "that may show in the square a learner's views show (50 x 50 m around it unless the "
+                             "scenario's [views] say otherwise; the teacher of 'crossway pretrain --teacher-sight "
+                             "view')")
     parser.add_argument("--scripted-approach-speed", type=float, default=None, metavar="M_PER_S",
                         help="with --scripted: slow to this speed [m/s] before every conflict zone shared with a "
                              "route that would have priority, whether or not a car is there (a driver that expects "

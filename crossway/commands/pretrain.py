@@ -39,8 +39,9 @@ def add_parser(subparsers) -> None:
                         help="discount of the value targets per 0.1 s step; use the one 'crossway train' will use")
     parser.add_argument("--teacher-sight", choices=("full", "view"), default="full",
                         help="full: the teacher yields to every car with priority, wherever it is; view: only to "
-                             "those that may show (any part of them) in the square its views show (50 x 50 m around it unless the scenario's "
-                             "[views] say otherwise), so that its labels follow from the network's input")
+                             "those that may show (any part of them) in the square its views show (50 x 50 m "
+                             "around it unless the scenario's [views] say otherwise), so that its labels follow "
+                             "from the network's input")
     parser.add_argument("--teacher-half-life", type=float, default=20_000.0, metavar="SAMPLES",
                         help="a new episode is driven by the teacher with probability 0.5**(samples collected / "
                              "SAMPLES), by the network otherwise (DAgger); 'inf': always the teacher")

@@ -40,7 +40,8 @@ def main() -> None:
             if episode.seen_in_time(found):
                 counts["seen_in_time"] += 1
                 # the driver's old criterion: the centre inside the square (shrink the grown square back)
-                counts["seen_in_time_by_centre"] += episode.seen_in_time(found, sim.spec.views.extent_m - VEHICLE_LENGTH)
+                centre_extent_m = sim.spec.views.extent_m - VEHICLE_LENGTH
+                counts["seen_in_time_by_centre"] += episode.seen_in_time(found, centre_extent_m)
     print(json.dumps({"scenario": sim.spec.name, "episodes": args.episodes, "seed": args.seed, **counts}))
 
 
