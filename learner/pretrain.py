@@ -44,6 +44,8 @@ class PretrainConfig:
     gamma: float = 0.99  # discount of the value targets (use the one D-A3C will train with)
     # "full": the teacher yields to every car with priority; "view": only to those its views show
     teacher_sight: str = "full"
+    # the teacher slows to this speed before conflict zones a car with priority may come to [m/s]; None: it does not
+    teacher_approach_mps: float | None = None
     teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
     brake_weight: float = 1.0  # weight of the teacher's hard-braking labels in the action loss (imitation_loss)
     buffer_samples: int = 40_000  # replay capacity, 28 KB per sample
@@ -76,6 +78,8 @@ class Pretrainer:
             raise ValueError("minutes, steps_per_round, batch_size and reuse must be positive")
         if config.teacher_sight not in TEACHER_SIGHTS:
             raise ValueError(f"teacher_sight must be one of {TEACHER_SIGHTS}, got {config.teacher_sight!r}")
+        if config.teacher_approach_mps is not None and not 0.0 < config.teacher_approach_mps < float("inf"):
+            raise ValueError(f"teacher_approach_mps must be > 0 m/s or None, got {config.teacher_approach_mps}")
         if not config.teacher_half_life > 0:
             raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
         if not config.brake_weight > 0:
@@ -88,7 +92,8 @@ class Pretrainer:
         self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=config.learning_rate)
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
-        self.teacher = ScriptedDriver(self.sim, **(view_sight(self.sim) if config.teacher_sight == "view" else {}))
+        self.teacher = ScriptedDriver(self.sim, approach_speed_mps=config.teacher_approach_mps,
+                                      **(view_sight(self.sim) if config.teacher_sight == "view" else {}))
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()
@@ -192,7 +197,8 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     ``pretrained.pt``, ``pretrain.json`` and ``progress.csv``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     trainer = Pretrainer(config)
-    log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}), "
+    approach = "" if config.teacher_approach_mps is None else f", approach {config.teacher_approach_mps:g} m/s"
+    log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}{approach}), "
         f"buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")
     started = time.monotonic()

@@ -123,6 +123,22 @@ def test_training_on_the_teachers_labels_brings_the_network_towards_them():
     assert float(after) < 0.4 * float(before)  # measured: 0.326 -> 0.064 (seed 0)
 
 
+def test_a_teacher_with_an_approach_speed_labels_slower_driving():
+    """--teacher-approach-speed reaches the teacher: the cars it drives are slower on the same seed."""
+    from learner.pretrain import PretrainConfig, Pretrainer
+
+    mean_speed = {}
+    for approach in (None, 1.0):
+        trainer = Pretrainer(PretrainConfig(scenario="easy", teacher_sight="view", teacher_approach_mps=approach,
+                                            teacher_half_life=float("inf"), torch_threads=1))
+        assert trainer.teacher.approach_speed_mps == approach
+        trainer.collect(300)
+        mean_speed[approach] = float(trainer.buffer.scalars[: trainer.buffer.added, 0].mean())  # speed input
+    assert mean_speed[1.0] < 0.9 * mean_speed[None]  # measured: 6.43 against 7.59 m/s (seed 0)
+    with pytest.raises(ValueError, match="teacher_approach_mps"):
+        Pretrainer(PretrainConfig(scenario="easy", teacher_approach_mps=0.0))
+
+
 def crossway(*args, timeout=300):
     return subprocess.run([sys.executable, "-m", "crossway", *args], capture_output=True, text=True, timeout=timeout)
 
@@ -154,6 +170,8 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
     (["--teacher-half-life", "0"], "--teacher-half-life"),
     (["--gamma", "1.5"], "--gamma"),
     (["--brake-weight", "0"], "--brake-weight must be > 0"),
+    (["--teacher-approach-speed", "0"], "--teacher-approach-speed must be a speed > 0"),
+    (["--teacher-approach-speed", "nan"], "--teacher-approach-speed must be a speed > 0"),
 ])
 def test_pretrain_refuses_bad_input(tmp_path, args, message):
     result = crossway("pretrain", "--out", str(tmp_path / "never"), *args)

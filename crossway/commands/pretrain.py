@@ -42,6 +42,11 @@ def add_parser(subparsers) -> None:
                              "those that may show (any part of them) in the square its views show (50 x 50 m "
                              "around it unless the scenario's [views] say otherwise), so that its labels follow "
                              "from the network's input")
+    parser.add_argument("--teacher-approach-speed", type=float, default=None, metavar="M_PER_S",
+                        help="the teacher slows to this speed [m/s] before every conflict zone shared with a route "
+                             "that would have priority, whether or not a car is there: a driver that expects cars "
+                             "it cannot see yet (with --teacher-sight view, 1 m/s lifts its reach; "
+                             "docs/training.md). Default: no such slowing")
     parser.add_argument("--teacher-half-life", type=float, default=20_000.0, metavar="SAMPLES",
                         help="a new episode is driven by the teacher with probability 0.5**(samples collected / "
                              "SAMPLES), by the network otherwise (DAgger); 'inf': always the teacher")
@@ -76,6 +81,8 @@ def run(args) -> int:
         raise ValueError(f"--teacher-half-life must be > 0 samples, got {args.teacher_half_life}")
     if not args.brake_weight > 0:
         raise ValueError(f"--brake-weight must be > 0, got {args.brake_weight}")
+    if args.teacher_approach_speed is not None and not 0.0 < args.teacher_approach_speed < float("inf"):
+        raise ValueError(f"--teacher-approach-speed must be a speed > 0 m/s, got {args.teacher_approach_speed}")
     if args.delay_max is not None and not args.delay_max >= 0:
         raise ValueError(f"--delay-max must be >= 0, got {args.delay_max}")
     if args.out.exists() and not args.out.is_dir():
@@ -90,7 +97,8 @@ def run(args) -> int:
     config = PretrainConfig(
         scenario=args.scenario, minutes=args.minutes, rounds=args.rounds, steps_per_round=args.steps_per_round,
         reuse=args.reuse, batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef,
-        gamma=args.gamma, teacher_sight=args.teacher_sight, teacher_half_life=args.teacher_half_life,
+        gamma=args.gamma, teacher_sight=args.teacher_sight, teacher_approach_mps=args.teacher_approach_speed,
+        teacher_half_life=args.teacher_half_life,
         brake_weight=args.brake_weight,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
         torch_threads=args.threads)
