@@ -45,8 +45,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--teacher-approach-speed", type=float, default=None, metavar="M_PER_S",
                         help="the teacher slows to this speed [m/s] before every conflict zone shared with a route "
                              "that would have priority, whether or not a car is there: a driver that expects cars "
-                             "it cannot see yet (docs/training.md measures 1 m/s with --teacher-sight view). Default: no "
-                             "such slowing")
+                             "it cannot see yet (docs/training.md measures 1 m/s with --teacher-sight view). "
+                             "Default: no such slowing")
     parser.add_argument("--teacher-half-life", type=float, default=20_000.0, metavar="SAMPLES",
                         help="a new episode is driven by the teacher with probability 0.5**(samples collected / "
                              "SAMPLES), by the network otherwise (DAgger); 'inf': always the teacher")
