@@ -7,6 +7,11 @@ collection and training. A new episode is driven by the teacher with probability
 0.5 ** (samples collected / ``teacher_half_life``): 1 at first, then less and less (DAgger, Ross
 et al. 2011), so that later data come from the states the student itself reaches. The output is
 an exported policy that ``crossway train --init-from`` and every ``crossway evaluate`` take.
+
+With ``average_half_life`` set, the exported weights are an exponential moving average of the
+Adam iterates (Polyak and Juditsky 1992): each step's weights count 0.5 ** (steps since / half-life)
+of the average, which smooths the step-to-step noise of the last updates; the last iterate itself
+is written beside it (``pretrained-last.pt``) and is also the one that drives during collection.
 """
 
 from __future__ import annotations
@@ -53,6 +58,8 @@ class PretrainConfig:
     seed: int = 0
     init_from: Path | None = None  # start from these weights (a checkpoint or an exported policy)
     torch_threads: int = 2
+    # export an exponential moving average of the weights over Adam steps with this half-life (None: the last weights)
+    average_half_life: float | None = None
 
 
 def _config_dict(config: PretrainConfig) -> dict:
@@ -84,12 +91,18 @@ class Pretrainer:
             raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
         if not config.brake_weight > 0:
             raise ValueError(f"brake_weight must be > 0, got {config.brake_weight}")
+        if config.average_half_life is not None and not 0.0 < config.average_half_life < float("inf"):
+            raise ValueError(f"average_half_life must be > 0 Adam steps or None, got {config.average_half_life}")
         self.config = config
         torch.manual_seed(config.seed)
         torch.set_num_threads(config.torch_threads)
         self.policy = load_policy(config.init_from) if config.init_from is not None else Policy(PolicyConfig())
         self.policy.train()
         self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=config.learning_rate)
+        # the moving average of the weights (average_half_life), starting at the initial ones
+        self.averaged: dict[str, torch.Tensor] | None = None
+        if config.average_half_life is not None:
+            self.averaged = {name: p.detach().clone() for name, p in self.policy.named_parameters()}
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
         self.teacher = ScriptedDriver(self.sim, approach_speed_mps=config.teacher_approach_mps,
@@ -157,9 +170,18 @@ class Pretrainer:
             torch.nn.utils.clip_grad_norm_(self.policy.parameters(), 40.0)
             self.optimizer.step()
             self.updates += 1
+            if self.averaged is not None:
+                self._update_average()
             for name, value in metrics.items():
                 totals[name] = totals.get(name, 0.0) + value
         return {name: value / max(updates, 1) for name, value in totals.items()}
+
+    def _update_average(self) -> None:
+        """average <- decay * average + (1 - decay) * weights, decay = 0.5 ** (1 / half-life)."""
+        decay = 0.5 ** (1.0 / self.config.average_half_life)
+        with torch.no_grad():
+            for name, p in self.policy.named_parameters():
+                self.averaged[name].mul_(decay).add_(p.detach(), alpha=1.0 - decay)
 
     def run_round(self) -> dict:
         before = self.buffer.added
@@ -177,9 +199,14 @@ class Pretrainer:
         self.round += 1
         return row
 
-    def export(self, path: Path, note: str) -> Path:
+    def export(self, path: Path, note: str, averaged: bool = True) -> Path:
+        """Write the policy to ``path``: the moving average of the weights when there is one and
+        ``averaged``, else the last weights."""
         path.parent.mkdir(parents=True, exist_ok=True)
-        torch.save({"policy": self.policy.state_dict(), "policy_config": asdict(self.policy.config),
+        state = self.policy.state_dict()
+        if averaged and self.averaged is not None:
+            state = {**state, **{name: value.clone() for name, value in self.averaged.items()}}
+        torch.save({"policy": state, "policy_config": asdict(self.policy.config),
                     "version": 0, "agent_steps": 0, "note": note,
                     "views": views_record(self.sim.spec.views.extent_m, self.sim.spec.views.shift_m),
                     "pretrain": {**_config_dict(self.config), "samples": self.buffer.added,
@@ -228,6 +255,11 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     note = (f"{command}: {trainer.round} rounds, {trainer.buffer.added:,} samples, {trainer.updates:,} updates, "
             f"{wall / 60:.1f} min")
     path = trainer.export(out_dir / "pretrained.pt", note)
+    if trainer.averaged is not None:
+        last = trainer.export(out_dir / "pretrained-last.pt", note + " (the last weights, not their average)",
+                              averaged=False)
+        log(f"pretrain: {path.name} holds the weights' moving average (half-life "
+            f"{config.average_half_life:g} Adam steps), {last.name} the last weights")
     (out_dir / "pretrain.json").write_text(json.dumps(
         {"command": command, "wall_s": round(wall, 1), "rounds": trainer.round, "samples": trainer.buffer.added,
          "updates": trainer.updates, "config": _config_dict(config)}, indent=2))

@@ -139,6 +139,33 @@ def test_a_teacher_with_an_approach_speed_labels_slower_driving():
         Pretrainer(PretrainConfig(scenario="easy", teacher_approach_mps=0.0))
 
 
+def test_the_averaged_weights_are_the_moving_average_of_the_adam_iterates(tmp_path):
+    """--average-half-life: after each Adam step the average moves towards the new weights by
+    1 - 0.5 ** (1 / half-life); pretrained.pt holds the average, pretrained-last.pt the last weights."""
+    from learner.pretrain import PretrainConfig, Pretrainer, run_pretrain
+
+    trainer = Pretrainer(PretrainConfig(scenario="easy", teacher_half_life=float("inf"), learning_rate=1e-3,
+                                        average_half_life=2.0, torch_threads=1))
+    name = "acc.mu.weight"  # the acceleration head's last layer
+    by_hand = dict(trainer.policy.named_parameters())[name].detach().clone()
+    trainer.collect(200)
+    decay = 0.5 ** (1 / 2.0)
+    for _ in range(4):
+        trainer.train(1)
+        by_hand = decay * by_hand + (1 - decay) * dict(trainer.policy.named_parameters())[name].detach()
+    assert torch.allclose(trainer.averaged[name], by_hand, atol=1e-6)
+    assert not torch.allclose(trainer.averaged[name], dict(trainer.policy.named_parameters())[name])
+
+    out = tmp_path / "pre"
+    run_pretrain(PretrainConfig(scenario="easy", rounds=2, steps_per_round=150, teacher_half_life=300,
+                                average_half_life=5.0, torch_threads=1), out, "test", log=lambda line: None)
+    averaged, last = load_policy(out / "pretrained.pt"), load_policy(out / "pretrained-last.pt")
+    differ = [n for n, p in averaged.named_parameters() if not torch.equal(p, dict(last.named_parameters())[n])]
+    assert differ  # two rounds of Adam steps moved the last weights away from their average
+    with pytest.raises(ValueError, match="average_half_life"):
+        Pretrainer(PretrainConfig(scenario="easy", average_half_life=0.0))
+
+
 def crossway(*args, timeout=300):
     return subprocess.run([sys.executable, "-m", "crossway", *args], capture_output=True, text=True, timeout=timeout)
 
@@ -172,6 +199,7 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
     (["--brake-weight", "0"], "--brake-weight must be > 0"),
     (["--teacher-approach-speed", "0"], "--teacher-approach-speed must be a speed > 0"),
     (["--teacher-approach-speed", "nan"], "--teacher-approach-speed must be a speed > 0"),
+    (["--average-half-life", "0"], "--average-half-life must be > 0"),
 ])
 def test_pretrain_refuses_bad_input(tmp_path, args, message):
     result = crossway("pretrain", "--out", str(tmp_path / "never"), *args)

@@ -53,6 +53,11 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--brake-weight", type=float, default=1.0, metavar="W",
                         help="count each sample the teacher brakes hard in (-1.5 m/s2 or more) W times in the "
                              "acceleration loss: such samples are few (about 7%% on hard) and decide the crashes")
+    parser.add_argument("--average-half-life", type=float, default=None, metavar="UPDATES",
+                        help="write as OUT/pretrained.pt a moving average of the weights over the Adam steps, "
+                             "each step's weights counting 0.5**(steps since / UPDATES) (Polyak averaging: it "
+                             "smooths the noise of the last steps); the last weights go to OUT/pretrained-last.pt. "
+                             "Default: the last weights")
     parser.add_argument("--buffer-samples", type=int, default=40_000,
                         help="replay capacity in samples (28 KB each: 40,000 take 1.1 GB)")
     parser.add_argument("--delay-max", type=float, default=None, metavar="SECONDS",
@@ -83,6 +88,8 @@ def run(args) -> int:
         raise ValueError(f"--brake-weight must be > 0, got {args.brake_weight}")
     if args.teacher_approach_speed is not None and not 0.0 < args.teacher_approach_speed < float("inf"):
         raise ValueError(f"--teacher-approach-speed must be a speed > 0 m/s, got {args.teacher_approach_speed}")
+    if args.average_half_life is not None and not 0.0 < args.average_half_life < float("inf"):
+        raise ValueError(f"--average-half-life must be > 0 Adam steps, got {args.average_half_life}")
     if args.delay_max is not None and not args.delay_max >= 0:
         raise ValueError(f"--delay-max must be >= 0, got {args.delay_max}")
     if args.out.exists() and not args.out.is_dir():
@@ -101,7 +108,7 @@ def run(args) -> int:
         teacher_half_life=args.teacher_half_life,
         brake_weight=args.brake_weight,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
-        torch_threads=args.threads)
+        torch_threads=args.threads, average_half_life=args.average_half_life)
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True))
     return 0
