@@ -47,6 +47,7 @@ class TestSpec:
     checkpoint: str | None  # None: the scripted driver (a stand-in for tests and smoke runs)
     scripted_sight: str | None = None  # "view": the scripted driver sees only what learners see (view_sight)
     scripted_approach_mps: float | None = None  # the scripted driver's speed at a conflict zone (ScriptedDriver)
+    scripted_approach_signs: str = "all"  # which signs decide those zones (ScriptedDriver.approach_signs)
 
 
 def delay_schedule(training_delay_max_s: float) -> list[float]:
@@ -72,7 +73,8 @@ def run_test(spec: TestSpec, progress=None) -> dict:
         act = lambda: driver.act(result)  # noqa: E731 - reads the newest result
     else:
         sight = view_sight(sim) if spec.scripted_sight == "view" else {}
-        act = ScriptedDriver(sim, approach_speed_mps=spec.scripted_approach_mps, **sight).act
+        act = ScriptedDriver(sim, approach_speed_mps=spec.scripted_approach_mps,
+                             approach_signs=spec.scripted_approach_signs, **sight).act
     counts: dict[str, Counter] = defaultdict(Counter)
     speed_sum: Counter = Counter()
     done = 0
@@ -210,7 +212,7 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
                out_dir: Path, command: str, scripted_sight: str | None = None,
-               scripted_approach_mps: float | None = None) -> dict:
+               scripted_approach_mps: float | None = None, scripted_approach_signs: str = "all") -> dict:
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
@@ -218,13 +220,14 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
         from evaluation.policy import check_checkpoint
 
         check_checkpoint(checkpoint, spec)  # refuse a bad checkpoint before starting workers
-    tests = [TestSpec(spec, d, episodes, seed + i, checkpoint, scripted_sight, scripted_approach_mps)
+    tests = [TestSpec(spec, d, episodes, seed + i, checkpoint, scripted_sight, scripted_approach_mps,
+                      scripted_approach_signs)
              for i, d in enumerate(delay_schedule(spec.episodes.delay_max_s))]
     # each test runs as chunks of at most CHUNK_EPISODES episodes (own simulator, own seed), so
     # every worker stays busy to the end; the chunks do not depend on --workers
     chunks = [TestSpec(t.scenario, t.delay_max_s, min(CHUNK_EPISODES, t.episodes - start),
                        t.seed + 1000 * (start // CHUNK_EPISODES), t.checkpoint, t.scripted_sight,
-                       t.scripted_approach_mps)
+                       t.scripted_approach_mps, t.scripted_approach_signs)
               for t in tests for start in range(0, t.episodes, CHUNK_EPISODES)]
     started = time.monotonic()
     parts = run_parallel(run_test, [(c,) for c in chunks], episodes * len(tests), workers, f"table1 {spec.name}")
@@ -233,6 +236,7 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
             "delays_max_s": [t.delay_max_s for t in tests], "seed": seed, "workers": workers,
             "scripted_sight": scripted_sight, "scripted_approach_mps": scripted_approach_mps,
+            "scripted_approach_signs": scripted_approach_signs if scripted_approach_mps is not None else None,
             # the view square's half-side and shift [m]: what "view" limits the scripted driver to
             "scripted_sight_m": 0.5 * spec.views.extent_m if scripted_sight == "view" else None,
             "scripted_sight_shift_m": spec.views.shift_m if scripted_sight == "view" else None,

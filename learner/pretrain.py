@@ -51,6 +51,8 @@ class PretrainConfig:
     teacher_sight: str = "full"
     # the teacher slows to this speed before conflict zones a car with priority may come to [m/s]; None: it does not
     teacher_approach_mps: float | None = None
+    # which signs decide those zones: "all" (every arm's, privileged) or "own" (its own sign, others taken as unsigned)
+    teacher_approach_signs: str = "all"
     teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
     brake_weight: float = 1.0  # weight of the teacher's hard-braking labels in the action loss (imitation_loss)
     buffer_samples: int = 40_000  # replay capacity, 28 KB per sample
@@ -106,6 +108,7 @@ class Pretrainer:
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
         self.teacher = ScriptedDriver(self.sim, approach_speed_mps=config.teacher_approach_mps,
+                                      approach_signs=config.teacher_approach_signs,
                                       **(view_sight(self.sim) if config.teacher_sight == "view" else {}))
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma)
         self.rng = np.random.default_rng(config.seed)
@@ -224,7 +227,8 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     ``pretrained.pt``, ``pretrain.json`` and ``progress.csv``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     trainer = Pretrainer(config)
-    approach = "" if config.teacher_approach_mps is None else f", approach {config.teacher_approach_mps:g} m/s"
+    approach = ("" if config.teacher_approach_mps is None else
+                f", approach {config.teacher_approach_mps:g} m/s by {config.teacher_approach_signs} signs")
     log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}{approach}), "
         f"buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")

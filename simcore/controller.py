@@ -24,6 +24,11 @@ moment: before each conflict zone it shares with a route that would have priorit
 (by the signs now on the arms and priority to the right), it slows so that it reaches the zone's
 stop point at no more than that speed, braking at ``APPROACH_DECELERATION``. A driver limited to
 its views needs this (the paper's hard agents average 5.9 m/s at stop signs, Table I).
+``approach_signs`` says which zones: ``"all"`` judges priority by the signs now on every arm
+(privileged: a learner's sign channel shows only its own lane's line), ``"own"`` by its own sign
+alone, taking every other arm as unsigned, the worst case (so it slows before a zone with a route
+from the right when it has no sign, and before every crossing route when it has a yield or stop
+sign): a choice a learner can make from its views.
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ import math
 import numpy as np
 
 from simcore.dynamics import DT, MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
-from simcore.rightofway import SIGN_RANK
+from simcore.rightofway import SIGN_RANK, Sign
 from simcore.simulator import Simulator
 from simcore.views import VIEW_EXTENT_M, may_show
 
@@ -44,6 +49,7 @@ FOLLOW_GAP_M = 4.0  # bumper-to-bumper gap kept behind a car on a shared lane [m
 SPEED_GAIN = 1.5  # proportional speed control [1/s]
 VIEW_SIGHT_M = 0.5 * VIEW_EXTENT_M  # half-side of the square the paper's views show [m]
 APPROACH_DECELERATION = 2.0  # comfortable braking towards a conflict zone's approach speed [m/s^2]
+APPROACH_SIGNS = ("all", "own")  # which signs decide the zones to approach slowly (ScriptedDriver)
 
 
 def view_sight(sim: Simulator) -> dict[str, float]:
@@ -57,13 +63,16 @@ class ScriptedDriver:
 
     def __init__(self, sim: Simulator, speed_fraction: float = 0.9, yield_to_priority: bool = True,
                  sight_m: float | None = None, approach_speed_mps: float | None = None,
-                 sight_shift_m: float = 0.0):
+                 sight_shift_m: float = 0.0, approach_signs: str = "all"):
         if sight_m is not None and not sight_m > 0:
             raise ValueError(f"sight_m must be > 0 m or None, got {sight_m}")
         if not math.isfinite(sight_shift_m):
             raise ValueError(f"sight_shift_m must be a finite number of metres, got {sight_shift_m}")
         if approach_speed_mps is not None and not approach_speed_mps >= 0:
             raise ValueError(f"approach_speed_mps must be >= 0 m/s or None, got {approach_speed_mps}")
+        if approach_signs not in APPROACH_SIGNS:
+            raise ValueError(f"approach_signs must be one of {APPROACH_SIGNS}, got {approach_signs!r}")
+        self.approach_signs = approach_signs
         # speed at the stop point of a conflict zone with a route that may have priority [m/s]
         self.approach_speed_mps = approach_speed_mps
         self.sim = sim
@@ -89,7 +98,7 @@ class ScriptedDriver:
             higher &= self._in_sight(idx)
         zone_start = sim.priority.zone_start
         if self.approach_speed_mps is not None:
-            route_rank = SIGN_RANK[sim.branch_signs[self._entry_branch]]
+            route_rank = self._route_ranks()
         merge_at = sim.priority.merge_at
         half = 0.5 * VEHICLE_LENGTH
         for a, slot in enumerate(idx.tolist()):
@@ -140,6 +149,13 @@ class ScriptedDriver:
         np.clip(actions[:, 0], -MAX_ACCELERATION, MAX_ACCELERATION, out=actions[:, 0])
         np.clip(actions[:, 1], -MAX_STEERING, MAX_STEERING, out=actions[:, 1])
         return actions
+
+    def _route_ranks(self) -> np.ndarray:
+        """Each route's sign rank as the approach rule judges it (``approach_signs``): the sign now
+        on its arm, or with "own" that of an unsigned arm, the highest any arm can have."""
+        if self.approach_signs == "all":
+            return SIGN_RANK[self.sim.branch_signs[self._entry_branch]]
+        return np.full(len(self._entry_branch), SIGN_RANK[Sign.NONE])
 
     def _yield_zones(self, slot: int, route_rank: np.ndarray) -> np.ndarray:
         """Arc lengths [m] on ``slot``'s route where its conflict zones begin with the routes that

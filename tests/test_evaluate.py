@@ -58,11 +58,16 @@ def test_table1_scripted_end_to_end(tmp_path):
 
 def test_table1_scripted_with_the_views_sight(tmp_path):
     result = crossway("evaluate", "table1", "--scripted", "--scripted-sight", "view", "--scripted-approach-speed",
-                      "3", "--scenario", "easy", "--episodes", "3", "--workers", "1", "--out", str(tmp_path))
+                      "3", "--scripted-approach-signs", "own", "--scenario", "easy", "--episodes", "3", "--workers",
+                      "1", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
     report = json.loads((tmp_path / "table1-easy.json").read_text())
     assert report["meta"]["scripted_sight_m"] == 25.0  # half the 50 m view
     assert report["meta"]["scripted_approach_mps"] == 3.0
+    assert report["meta"]["scripted_approach_signs"] == "own"
+    alone = crossway("evaluate", "table1", "--scripted", "--scripted-approach-signs", "own", "--out",
+                     str(tmp_path / "never"))
+    assert alone.returncode == 2 and "--scripted-approach-signs goes with --scripted-approach-speed" in alone.stderr
     for option in (["--scripted-sight", "view"], ["--scripted-approach-speed", "3"]):
         refused = crossway("evaluate", "table1", "--checkpoint", str(tmp_path / "x.pt"), *option,
                            "--out", str(tmp_path / "never"))
@@ -116,6 +121,7 @@ def test_right_of_way_scripted_end_to_end(tmp_path):
     assert limited.returncode == 0, limited.stderr
     limited_summary = json.loads((tmp_path / "view" / "right-of-way-easy.json").read_text())
     assert (limited_summary["scripted_sight"], limited_summary["scripted_approach_mps"]) == ("view", 3.0)
+    assert limited_summary["scripted_approach_signs"] == "all"  # the default
     for run in (summary, limited_summary):  # the anatomy adds up
         assert 0 <= run["infractions_seen_in_time"] <= run["infractions"]
         assert 0 <= run["infractions_offender_crashed"] <= run["infractions"]

@@ -131,10 +131,12 @@ def test_a_teacher_with_an_approach_speed_labels_slower_driving():
     for approach in (None, 1.0):
         trainer = Pretrainer(PretrainConfig(scenario="easy", teacher_sight="view", teacher_approach_mps=approach,
                                             teacher_half_life=float("inf"), torch_threads=1))
-        assert trainer.teacher.approach_speed_mps == approach
+        assert trainer.teacher.approach_speed_mps == approach and trainer.teacher.approach_signs == "all"
         trainer.collect(300)
         mean_speed[approach] = float(trainer.buffer.scalars[: trainer.buffer.added, 0].mean())  # speed input
     assert mean_speed[1.0] < 0.9 * mean_speed[None]  # measured: 6.43 against 7.59 m/s (seed 0)
+    own = Pretrainer(PretrainConfig(scenario="easy", teacher_approach_mps=1.0, teacher_approach_signs="own"))
+    assert own.teacher.approach_signs == "own"
     with pytest.raises(ValueError, match="teacher_approach_mps"):
         Pretrainer(PretrainConfig(scenario="easy", teacher_approach_mps=0.0))
 
@@ -200,6 +202,7 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
     (["--teacher-approach-speed", "0"], "--teacher-approach-speed must be a speed > 0"),
     (["--teacher-approach-speed", "nan"], "--teacher-approach-speed must be a speed > 0"),
     (["--average-half-life", "0"], "--average-half-life must be > 0"),
+    (["--teacher-approach-signs", "own"], "--teacher-approach-signs goes with --teacher-approach-speed"),
 ])
 def test_pretrain_refuses_bad_input(tmp_path, args, message):
     result = crossway("pretrain", "--out", str(tmp_path / "never"), *args)

@@ -283,5 +283,31 @@ def test_a_cautious_teacher_slows_before_a_zone_shared_with_a_route_that_may_hav
     others = [b for b in range(len(sim.branch_signs)) if sim.intersection.branches[b].name != "south"]
     sim.branch_signs[others] = 2
     assert ScriptedDriver(sim, approach_speed_mps=approach_mps).act()[south, 0] == pytest.approx(plain)
+    # judged by its own sign alone (what its views show), the east arm may be unsigned: caution again
+    own = ScriptedDriver(sim, approach_speed_mps=approach_mps, approach_signs="own")
+    assert own.act()[south, 0] == pytest.approx(cautious)
     with pytest.raises(ValueError, match="approach_speed_mps"):
         ScriptedDriver(sim, approach_speed_mps=-1.0)
+    with pytest.raises(ValueError, match="approach_signs"):
+        ScriptedDriver(sim, approach_speed_mps=approach_mps, approach_signs="some")
+
+
+def test_a_teacher_judging_by_its_own_sign_slows_only_for_routes_an_unsigned_arm_would_give_priority(medium_road):
+    """approach_signs="own" with no sign of its own: only routes from the right may have priority;
+    with a stop sign: every route crossing its own."""
+    sim = medium_road
+    south_route = route_index(sim, "south_0", "straight")
+    sim.branch_signs[:] = 2  # stop signs everywhere: "all" sees no route with priority over an unsigned car
+    south = place(sim, "south_0", "straight", s=5.0, sign=0, speed=8.0)
+    zones = {}
+    for own_sign in (0, 2):
+        sim.sign[south] = own_sign
+        driver = ScriptedDriver(sim, approach_speed_mps=1.0, approach_signs="own")
+        zones[own_sign] = set(driver._yield_zones(south, driver._route_ranks()).tolist())
+    table = sim.priority
+    crossing = [r for r in range(len(sim.intersection.routes)) if table.conflict[south_route, r]
+                and sim.intersection.routes[r].entry_lane != sim.intersection.routes[south_route].entry_lane]
+    from_right = [r for r in crossing if table.right_wins[south_route, r]]
+    assert 0 < len(from_right) < len(crossing)
+    assert zones[0] == {float(table.zone_start[south_route, r]) for r in from_right}
+    assert zones[2] == {float(table.zone_start[south_route, r]) for r in crossing}

@@ -106,16 +106,24 @@ def _add_scripted_options(parser) -> None:
                         help="with --scripted: slow to this speed [m/s] before every conflict zone shared with a "
                              "route that would have priority, whether or not a car is there (a driver that expects "
                              "cars it cannot see yet); default: no such caution")
+    parser.add_argument("--scripted-approach-signs", choices=("all", "own"), default=None,
+                        help="with --scripted-approach-speed: which signs decide the routes that would have "
+                             "priority: all (default) the signs now on every arm; own the car's own sign alone, "
+                             "every other arm taken as unsigned (what a learner's views show)")
 
 
 def _scripted_options(args, checkpoint: str | None) -> dict:
     """``scripted_sight`` and ``scripted_approach_mps`` for the evaluation; refuses them with a checkpoint."""
-    if checkpoint is not None and (args.scripted_sight is not None or args.scripted_approach_speed is not None):
+    if checkpoint is not None and (args.scripted_sight is not None or args.scripted_approach_speed is not None
+                                   or args.scripted_approach_signs is not None):
         raise ValueError("--scripted-sight and --scripted-approach-speed go with --scripted, not with --checkpoint")
+    if args.scripted_approach_signs is not None and args.scripted_approach_speed is None:
+        raise ValueError("--scripted-approach-signs goes with --scripted-approach-speed")
     if args.scripted_approach_speed is not None and not args.scripted_approach_speed >= 0:
         raise ValueError(f"--scripted-approach-speed must be >= 0 m/s, got {args.scripted_approach_speed}")
     return {"scripted_sight": args.scripted_sight if args.scripted_sight == "view" else None,
-            "scripted_approach_mps": args.scripted_approach_speed}
+            "scripted_approach_mps": args.scripted_approach_speed,
+            "scripted_approach_signs": args.scripted_approach_signs or "all"}
 
 
 def _add_run_options(parser, episodes: int, episodes_help: str) -> None:

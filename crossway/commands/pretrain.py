@@ -47,6 +47,11 @@ def add_parser(subparsers) -> None:
                              "that would have priority, whether or not a car is there: a driver that expects cars "
                              "it cannot see yet (docs/training.md measures 1 m/s with --teacher-sight view). "
                              "Default: no such slowing")
+    parser.add_argument("--teacher-approach-signs", choices=("all", "own"), default="all",
+                        help="with --teacher-approach-speed: which signs decide the routes that would have priority: "
+                             "all the signs now on every arm (a learner's views show only its own lane's sign "
+                             "line); own the car's own sign alone, every other arm taken as unsigned, so that the "
+                             "slowing follows from what the views show")
     parser.add_argument("--teacher-half-life", type=float, default=20_000.0, metavar="SAMPLES",
                         help="a new episode is driven by the teacher with probability 0.5**(samples collected / "
                              "SAMPLES), by the network otherwise (DAgger); 'inf': always the teacher")
@@ -88,6 +93,8 @@ def run(args) -> int:
         raise ValueError(f"--brake-weight must be > 0, got {args.brake_weight}")
     if args.teacher_approach_speed is not None and not 0.0 < args.teacher_approach_speed < float("inf"):
         raise ValueError(f"--teacher-approach-speed must be a speed > 0 m/s, got {args.teacher_approach_speed}")
+    if args.teacher_approach_signs != "all" and args.teacher_approach_speed is None:
+        raise ValueError("--teacher-approach-signs goes with --teacher-approach-speed")
     if args.average_half_life is not None and not 0.0 < args.average_half_life < float("inf"):
         raise ValueError(f"--average-half-life must be > 0 Adam steps, got {args.average_half_life}")
     if args.delay_max is not None and not args.delay_max >= 0:
@@ -105,6 +112,7 @@ def run(args) -> int:
         scenario=args.scenario, minutes=args.minutes, rounds=args.rounds, steps_per_round=args.steps_per_round,
         reuse=args.reuse, batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef,
         gamma=args.gamma, teacher_sight=args.teacher_sight, teacher_approach_mps=args.teacher_approach_speed,
+        teacher_approach_signs=args.teacher_approach_signs,
         teacher_half_life=args.teacher_half_life,
         brake_weight=args.brake_weight,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
