@@ -180,7 +180,7 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
     import torch
 
     from evaluation.policy import PolicyDriver, load_policy
-    from simcore.controller import ScriptedDriver, view_sight
+    from simcore.controller import scripted_driver
     from simcore.simulator import Simulator
 
     torch.set_num_threads(1)
@@ -195,9 +195,7 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
         if policy is not None:
             driver = PolicyDriver(sim, policy)
         else:
-            sight = view_sight(sim) if scripted_sight == "view" else {}
-            driver = ScriptedDriver(sim, approach_speed_mps=scripted_approach_mps,
-                                    approach_signs=scripted_approach_signs, **sight)
+            driver = scripted_driver(sim, scripted_sight, scripted_approach_mps, scripted_approach_signs)
         episode = drive_episode(sim, lambda r: driver.act(r) if policy is not None else driver.act(), result)
         for reason in filter(None, episode.end_reasons):  # "" for a car still driving at the time limit
             end_reasons[reason] = end_reasons.get(reason, 0) + 1

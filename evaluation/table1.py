@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import time
 from collections import Counter, defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -61,7 +61,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
     import torch
 
     from evaluation.policy import PolicyDriver, load_policy
-    from simcore.controller import ScriptedDriver, view_sight
+    from simcore.controller import scripted_driver
     from simcore.simulator import SimConfig, Simulator
 
     torch.set_num_threads(1)
@@ -72,9 +72,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
         driver = PolicyDriver(sim, load_policy(spec.checkpoint))
         act = lambda: driver.act(result)  # noqa: E731 - reads the newest result
     else:
-        sight = view_sight(sim) if spec.scripted_sight == "view" else {}
-        act = ScriptedDriver(sim, approach_speed_mps=spec.scripted_approach_mps,
-                             approach_signs=spec.scripted_approach_signs, **sight).act
+        act = scripted_driver(sim, spec.scripted_sight, spec.scripted_approach_mps, spec.scripted_approach_signs).act
     counts: dict[str, Counter] = defaultdict(Counter)
     speed_sum: Counter = Counter()
     done = 0
@@ -225,9 +223,8 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
              for i, d in enumerate(delay_schedule(spec.episodes.delay_max_s))]
     # each test runs as chunks of at most CHUNK_EPISODES episodes (own simulator, own seed), so
     # every worker stays busy to the end; the chunks do not depend on --workers
-    chunks = [TestSpec(t.scenario, t.delay_max_s, min(CHUNK_EPISODES, t.episodes - start),
-                       t.seed + 1000 * (start // CHUNK_EPISODES), t.checkpoint, t.scripted_sight,
-                       t.scripted_approach_mps, t.scripted_approach_signs)
+    chunks = [replace(t, episodes=min(CHUNK_EPISODES, t.episodes - start),
+                      seed=t.seed + 1000 * (start // CHUNK_EPISODES))
               for t in tests for start in range(0, t.episodes, CHUNK_EPISODES)]
     started = time.monotonic()
     parts = run_parallel(run_test, [(c,) for c in chunks], episodes * len(tests), workers, f"table1 {spec.name}")

@@ -79,7 +79,7 @@ class Pretrainer:
     """Collection and training, one round at a time; ``run_pretrain`` loops until the budget is spent."""
 
     def __init__(self, config: PretrainConfig):
-        from simcore.controller import ScriptedDriver, view_sight
+        from simcore.controller import scripted_driver
         from simcore.simulator import SimConfig, Simulator
 
         if (config.minutes <= 0 or config.rounds < 0 or config.steps_per_round < 1 or config.batch_size < 1
@@ -107,9 +107,8 @@ class Pretrainer:
             self.averaged = {name: p.detach().clone() for name, p in self.policy.named_parameters()}
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
-        self.teacher = ScriptedDriver(self.sim, approach_speed_mps=config.teacher_approach_mps,
-                                      approach_signs=config.teacher_approach_signs,
-                                      **(view_sight(self.sim) if config.teacher_sight == "view" else {}))
+        self.teacher = scripted_driver(self.sim, config.teacher_sight, config.teacher_approach_mps,
+                                       config.teacher_approach_signs)
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()

@@ -58,6 +58,14 @@ def view_sight(sim: Simulator) -> dict[str, float]:
     return {"sight_m": 0.5 * sim.spec.views.extent_m, "sight_shift_m": sim.spec.views.shift_m}
 
 
+def scripted_driver(sim: Simulator, sight: str | None = "full", approach_speed_mps: float | None = None,
+                    approach_signs: str = "all") -> "ScriptedDriver":
+    """The scripted driver as the commands name it: ``sight`` "view" limits it to what ``sim``'s
+    learners see (``view_sight``), "full" or None lets it see every car."""
+    return ScriptedDriver(sim, approach_speed_mps=approach_speed_mps, approach_signs=approach_signs,
+                          **(view_sight(sim) if sight == "view" else {}))
+
+
 class ScriptedDriver:
     """Acts for every slot of a ``Simulator``; ``act()`` returns a ``[slots, 2]`` action array."""
 

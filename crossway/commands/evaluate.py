@@ -113,10 +113,11 @@ def _add_scripted_options(parser) -> None:
 
 
 def _scripted_options(args, checkpoint: str | None) -> dict:
-    """``scripted_sight`` and ``scripted_approach_mps`` for the evaluation; refuses them with a checkpoint."""
+    """The scripted driver's options for the evaluation; refuses them with a checkpoint."""
     if checkpoint is not None and (args.scripted_sight is not None or args.scripted_approach_speed is not None
                                    or args.scripted_approach_signs is not None):
-        raise ValueError("--scripted-sight and --scripted-approach-speed go with --scripted, not with --checkpoint")
+        raise ValueError("--scripted-sight, --scripted-approach-speed and --scripted-approach-signs go with "
+                         "--scripted, not with --checkpoint")
     if args.scripted_approach_signs is not None and args.scripted_approach_speed is None:
         raise ValueError("--scripted-approach-signs goes with --scripted-approach-speed")
     if args.scripted_approach_speed is not None and not args.scripted_approach_speed >= 0:
