@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from simcore.controller import DriverOptions
 from simcore.dynamics import DT, MAX_ACCELERATION, VEHICLE_LENGTH
 from simcore.rewards import END_REASON_NAMES, EndReason
 from simcore.rightofway import PriorityTable
@@ -169,14 +170,11 @@ PAPER_TABLE2 = {"easy": 0.985, "medium": 0.990, "hard": 0.863}  # "No infraction
 
 
 def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes: int, seed: int,
-                 scripted_sight: str | None = None, scripted_approach_mps: float | None = None,
-                 scripted_approach_signs: str = "all", progress=None) -> dict:
+                 scripted: DriverOptions | None = None, progress=None) -> dict:
     """Synchronised episodes: every lane starts at once with a random route and sign, all cars at
     the same current and target speed; an episode ends when every car has ended (paper,
-    "Testing the Right of Way Rule"). Without a checkpoint the scripted driver drives, seeing
-    every car or (``scripted_sight="view"``) only those inside the learners' views, and slowing
-    to ``scripted_approach_mps`` before conflict zones if given (which zones:
-    ``scripted_approach_signs``, ``ScriptedDriver.approach_signs``). Runs in a worker process."""
+    "Testing the Right of Way Rule"). Without a checkpoint the scripted driver drives, with the
+    options ``scripted`` (``simcore.controller.DriverOptions``). Runs in a worker process."""
     import torch
 
     from evaluation.policy import PolicyDriver, load_policy
@@ -195,7 +193,7 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
         if policy is not None:
             driver = PolicyDriver(sim, policy)
         else:
-            driver = scripted_driver(sim, scripted_sight, scripted_approach_mps, scripted_approach_signs)
+            driver = scripted_driver(sim, scripted)
         episode = drive_episode(sim, lambda r: driver.act(r) if policy is not None else driver.act(), result)
         for reason in filter(None, episode.end_reasons):  # "" for a car still driving at the time limit
             end_reasons[reason] = end_reasons.get(reason, 0) + 1
@@ -213,8 +211,7 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
 
 
 def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
-                     out_dir, command: str, scripted_sight: str | None = None,
-                     scripted_approach_mps: float | None = None, scripted_approach_signs: str = "all") -> dict:
+                     out_dir, command: str, scripted: DriverOptions | None = None) -> dict:
     """The whole test in parallel workers; writes JSON, CSV and Markdown into ``out_dir``."""
     import json
     import time
@@ -231,7 +228,8 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     workers = max(1, min(workers, episodes))
     shares = [episodes // workers + (i < episodes % workers) for i in range(workers)]
     started = time.monotonic()
-    jobs = [(spec, checkpoint, n, seed + 1000 * i, scripted_sight, scripted_approach_mps, scripted_approach_signs)
+    scripted = scripted or DriverOptions()
+    jobs = [(spec, checkpoint, n, seed + 1000 * i, scripted)
             for i, n in enumerate(shares)]
     parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}")
     clean = sum(p["no_infraction"] for p in parts)
@@ -252,10 +250,7 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
                "infractions_offender_crashed": sum(p["anatomy"]["offender_crashed"] for p in parts),
                "view_extent_m": spec.views.extent_m, "view_shift_m": spec.views.shift_m,
                "agent_end_reasons": end_reasons, "checkpoint": checkpoint,
-               "scripted_sight": scripted_sight if checkpoint is None else None,
-               "scripted_approach_mps": scripted_approach_mps if checkpoint is None else None,
-               "scripted_approach_signs": (scripted_approach_signs if checkpoint is None
-                                           and scripted_approach_mps is not None else None),
+               **(scripted.record() if checkpoint is None else dict.fromkeys(scripted.record())),
                "seed": seed, "workers": workers,
                "wall_s": round(time.monotonic() - started, 1), "command": command}
     out_dir = Path(out_dir)

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from evaluation.parallel import run_parallel
+from simcore.controller import DriverOptions
 
 if TYPE_CHECKING:
     from simcore.scenario import ScenarioSpec
@@ -44,10 +45,8 @@ class TestSpec:
     delay_max_s: float
     episodes: int
     seed: int
-    checkpoint: str | None  # None: the scripted driver (a stand-in for tests and smoke runs)
-    scripted_sight: str | None = None  # "view": the scripted driver sees only what learners see (view_sight)
-    scripted_approach_mps: float | None = None  # the scripted driver's speed at a conflict zone (ScriptedDriver)
-    scripted_approach_signs: str = "all"  # which signs decide those zones (ScriptedDriver.approach_signs)
+    checkpoint: str | None  # None: the scripted driver (a reference, and a stand-in for tests and smoke runs)
+    scripted: DriverOptions = DriverOptions()  # the scripted driver's options, without a checkpoint
 
 
 def delay_schedule(training_delay_max_s: float) -> list[float]:
@@ -72,7 +71,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
         driver = PolicyDriver(sim, load_policy(spec.checkpoint))
         act = lambda: driver.act(result)  # noqa: E731 - reads the newest result
     else:
-        act = scripted_driver(sim, spec.scripted_sight, spec.scripted_approach_mps, spec.scripted_approach_signs).act
+        act = scripted_driver(sim, spec.scripted).act
     counts: dict[str, Counter] = defaultdict(Counter)
     speed_sum: Counter = Counter()
     done = 0
@@ -209,8 +208,9 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
 
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
-               out_dir: Path, command: str, scripted_sight: str | None = None,
-               scripted_approach_mps: float | None = None, scripted_approach_signs: str = "all") -> dict:
+               out_dir: Path, command: str, scripted: DriverOptions | None = None) -> dict:
+    """The whole protocol in parallel workers (``scripted``: the scripted driver's options when
+    ``checkpoint`` is None); writes JSON, CSV and Markdown into ``out_dir``."""
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
@@ -218,8 +218,8 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
         from evaluation.policy import check_checkpoint
 
         check_checkpoint(checkpoint, spec)  # refuse a bad checkpoint before starting workers
-    tests = [TestSpec(spec, d, episodes, seed + i, checkpoint, scripted_sight, scripted_approach_mps,
-                      scripted_approach_signs)
+    scripted = scripted or DriverOptions()
+    tests = [TestSpec(spec, d, episodes, seed + i, checkpoint, scripted)
              for i, d in enumerate(delay_schedule(spec.episodes.delay_max_s))]
     # each test runs as chunks of at most CHUNK_EPISODES episodes (own simulator, own seed), so
     # every worker stays busy to the end; the chunks do not depend on --workers
@@ -232,11 +232,10 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
     table = summarise(results)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
             "delays_max_s": [t.delay_max_s for t in tests], "seed": seed, "workers": workers,
-            "scripted_sight": scripted_sight, "scripted_approach_mps": scripted_approach_mps,
-            "scripted_approach_signs": scripted_approach_signs if scripted_approach_mps is not None else None,
+            **(scripted.record() if checkpoint is None else dict.fromkeys(scripted.record())),
             # the view square's half-side and shift [m]: what "view" limits the scripted driver to
-            "scripted_sight_m": 0.5 * spec.views.extent_m if scripted_sight == "view" else None,
-            "scripted_sight_shift_m": spec.views.shift_m if scripted_sight == "view" else None,
+            "scripted_sight_m": 0.5 * spec.views.extent_m if scripted.sight == "view" else None,
+            "scripted_sight_shift_m": spec.views.shift_m if scripted.sight == "view" else None,
             "wall_s": round(time.monotonic() - started, 1), "command": command}
     paths = write_outputs(out_dir, spec.name, results, table, meta)
     return {"table": table, "paths": paths, "meta": meta}

@@ -28,11 +28,12 @@ import torch
 
 from algo.imitation import DemonstrationBuffer, Episode, imitation_loss, newest_frames
 from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy, views_record
+from simcore.controller import SIGHTS
 
 PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
                     "action_loss_sa", "value_loss_acc", "value_loss_sa", "student_episodes",
                     "student_reach_rate", "teacher_episodes", "teacher_reach_rate")
-TEACHER_SIGHTS = ("full", "view")
+TEACHER_SIGHTS = SIGHTS  # the teacher's sight (simcore.controller.DriverOptions.sight)
 ROLLING_EPISODES = 200  # reach rates are over each driver's last this many finished episodes
 
 
@@ -53,6 +54,8 @@ class PretrainConfig:
     teacher_approach_mps: float | None = None
     # which signs decide those zones: "all" (every arm's, privileged) or "own" (its own sign, others taken as unsigned)
     teacher_approach_signs: str = "all"
+    # the teacher also stops before a conflict zone a car in sight occupies, whatever the priority
+    teacher_brake_for_blockers: bool = False
     teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
     brake_weight: float = 1.0  # weight of the teacher's hard-braking labels in the action loss (imitation_loss)
     buffer_samples: int = 40_000  # replay capacity, 28 KB per sample
@@ -79,7 +82,7 @@ class Pretrainer:
     """Collection and training, one round at a time; ``run_pretrain`` loops until the budget is spent."""
 
     def __init__(self, config: PretrainConfig):
-        from simcore.controller import scripted_driver
+        from simcore.controller import DriverOptions, scripted_driver
         from simcore.simulator import SimConfig, Simulator
 
         if (config.minutes <= 0 or config.rounds < 0 or config.steps_per_round < 1 or config.batch_size < 1
@@ -107,8 +110,9 @@ class Pretrainer:
             self.averaged = {name: p.detach().clone() for name, p in self.policy.named_parameters()}
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
-        self.teacher = scripted_driver(self.sim, config.teacher_sight, config.teacher_approach_mps,
-                                       config.teacher_approach_signs)
+        self.teacher = scripted_driver(self.sim, DriverOptions(
+            sight=config.teacher_sight, approach_speed_mps=config.teacher_approach_mps,
+            approach_signs=config.teacher_approach_signs, brake_for_blockers=config.teacher_brake_for_blockers))
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()
@@ -228,6 +232,7 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     trainer = Pretrainer(config)
     approach = ("" if config.teacher_approach_mps is None else
                 f", approach {config.teacher_approach_mps:g} m/s by {config.teacher_approach_signs} signs")
+    approach += ", brakes for blockers" if config.teacher_brake_for_blockers else ""
     log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}{approach}), "
         f"buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")

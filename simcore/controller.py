@@ -29,11 +29,18 @@ its views needs this (the paper's hard agents average 5.9 m/s at stop signs, Tab
 alone, taking every other arm as unsigned, the worst case (so it slows before a zone with a route
 from the right when it has no sign, and before every crossing route when it has a yield or stop
 sign): a choice a learner can make from its views.
+
+With ``brake_for_blockers`` it also stops before a conflict zone that a car in sight occupies now,
+whatever the priority: a car standing in the junction is an obstacle, even for a car with the
+right of way (docs/training.md measures that most crashes of the view-limited driver on easy were
+a car with priority running into one that had stopped inside its zone). After standing
+``BLOCKER_PATIENCE_S`` it goes anyway: three cars can each stand in the zone of the next.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -50,6 +57,8 @@ SPEED_GAIN = 1.5  # proportional speed control [1/s]
 VIEW_SIGHT_M = 0.5 * VIEW_EXTENT_M  # half-side of the square the paper's views show [m]
 APPROACH_DECELERATION = 2.0  # comfortable braking towards a conflict zone's approach speed [m/s^2]
 APPROACH_SIGNS = ("all", "own")  # which signs decide the zones to approach slowly (ScriptedDriver)
+SIGHTS = ("full", "view")  # what the scripted driver sees (DriverOptions.sight)
+BLOCKER_PATIENCE_S = 8.0  # after standing this long, ignore cars standing in its way (brake_for_blockers) [s]
 
 
 def view_sight(sim: Simulator) -> dict[str, float]:
@@ -58,12 +67,39 @@ def view_sight(sim: Simulator) -> dict[str, float]:
     return {"sight_m": 0.5 * sim.spec.views.extent_m, "sight_shift_m": sim.spec.views.shift_m}
 
 
-def scripted_driver(sim: Simulator, sight: str | None = "full", approach_speed_mps: float | None = None,
-                    approach_signs: str = "all") -> "ScriptedDriver":
-    """The scripted driver as the commands name it: ``sight`` "view" limits it to what ``sim``'s
-    learners see (``view_sight``), "full" or None lets it see every car."""
-    return ScriptedDriver(sim, approach_speed_mps=approach_speed_mps, approach_signs=approach_signs,
-                          **(view_sight(sim) if sight == "view" else {}))
+@dataclass(frozen=True)
+class DriverOptions:
+    """The scripted driver as the commands configure it (``crossway evaluate --scripted-*``,
+    ``crossway pretrain --teacher-*``); ``scripted_driver`` builds it for a simulator."""
+
+    sight: str = "full"  # "full": it sees every car; "view": only those sim's learners' views may show
+    approach_speed_mps: float | None = None  # slow to this speed before zones of routes that may have priority
+    approach_signs: str = "all"  # which signs decide those zones (ScriptedDriver.approach_signs)
+    brake_for_blockers: bool = False  # stop before a zone a car in sight occupies, whatever the priority
+
+    def __post_init__(self):
+        if self.sight not in SIGHTS:
+            raise ValueError(f"sight must be one of {SIGHTS}, got {self.sight!r}")
+        if self.approach_speed_mps is not None and not 0.0 <= self.approach_speed_mps < math.inf:
+            raise ValueError(f"approach_speed_mps must be >= 0 m/s or None, got {self.approach_speed_mps}")
+        if self.approach_signs not in APPROACH_SIGNS:
+            raise ValueError(f"approach_signs must be one of {APPROACH_SIGNS}, got {self.approach_signs!r}")
+
+    def record(self) -> dict:
+        """The options as an evaluation's JSON records them (approach_signs only with a speed)."""
+        return {"scripted_sight": self.sight if self.sight == "view" else None,
+                "scripted_approach_mps": self.approach_speed_mps,
+                "scripted_approach_signs": self.approach_signs if self.approach_speed_mps is not None else None,
+                "scripted_brake_for_blockers": self.brake_for_blockers}
+
+
+def scripted_driver(sim: Simulator, options: DriverOptions | None = None) -> "ScriptedDriver":
+    """The scripted driver as the commands name it (``DriverOptions``; None: the defaults, every
+    car in sight); sight "view" limits it to what ``sim``'s learners see (``view_sight``)."""
+    options = options or DriverOptions()
+    return ScriptedDriver(sim, approach_speed_mps=options.approach_speed_mps, approach_signs=options.approach_signs,
+                          brake_for_blockers=options.brake_for_blockers,
+                          **(view_sight(sim) if options.sight == "view" else {}))
 
 
 class ScriptedDriver:
@@ -71,7 +107,7 @@ class ScriptedDriver:
 
     def __init__(self, sim: Simulator, speed_fraction: float = 0.9, yield_to_priority: bool = True,
                  sight_m: float | None = None, approach_speed_mps: float | None = None,
-                 sight_shift_m: float = 0.0, approach_signs: str = "all"):
+                 sight_shift_m: float = 0.0, approach_signs: str = "all", brake_for_blockers: bool = False):
         if sight_m is not None and not sight_m > 0:
             raise ValueError(f"sight_m must be > 0 m or None, got {sight_m}")
         if not math.isfinite(sight_shift_m):
@@ -81,6 +117,7 @@ class ScriptedDriver:
         if approach_signs not in APPROACH_SIGNS:
             raise ValueError(f"approach_signs must be one of {APPROACH_SIGNS}, got {approach_signs!r}")
         self.approach_signs = approach_signs
+        self.brake_for_blockers = brake_for_blockers
         # speed at the stop point of a conflict zone with a route that may have priority [m/s]
         self.approach_speed_mps = approach_speed_mps
         self.sim = sim
@@ -102,8 +139,8 @@ class ScriptedDriver:
         if not learners.any():
             return actions
         higher = sim.priorities(idx) if self.yield_to_priority else np.zeros((len(idx),) * 2, bool)
-        if self.sight_m is not None:
-            higher &= self._in_sight(idx)
+        sight = self._in_sight(idx) if self.sight_m is not None else np.ones((len(idx),) * 2, bool)
+        higher &= sight
         zone_start = sim.priority.zone_start
         if self.approach_speed_mps is not None:
             route_rank = self._route_ranks()
@@ -150,6 +187,8 @@ class ScriptedDriver:
                 if gap < 3.0 * speed + 5.0:
                     braking = -speed * speed / (2.0 * gap) if gap > 0.5 else -MAX_ACCELERATION
                     acceleration = min(acceleration, braking)
+            if self.brake_for_blockers and self._standing_s[slot] < BLOCKER_PATIENCE_S:
+                acceleration = min(acceleration, self._blocker_braking(slot, idx, sight[a], speed, s_front))
             actions[slot] = (acceleration, steering)
         standing = learners & (sim.speed[: sim.num_slots] < 0.5)
         self._standing_s[standing] += DT
@@ -157,6 +196,34 @@ class ScriptedDriver:
         np.clip(actions[:, 0], -MAX_ACCELERATION, MAX_ACCELERATION, out=actions[:, 0])
         np.clip(actions[:, 1], -MAX_STEERING, MAX_STEERING, out=actions[:, 1])
         return actions
+
+    def _blocker_braking(self, slot: int, idx: np.ndarray, in_sight: np.ndarray, speed: float,
+                         s_front: float) -> float:
+        """Braking [m/s^2] to stop before a conflict zone that a car in sight occupies now, whatever
+        the priority (a car standing in the junction is an obstacle); +inf when none."""
+        sim, table = self.sim, self.sim.priority
+        half = 0.5 * VEHICLE_LENGTH
+        route = sim.route[slot]
+        best = math.inf
+        for b, other in enumerate(idx.tolist()):
+            if other == slot or not in_sight[b]:
+                continue
+            ro = sim.route[other]
+            # crossing routes only: a shared lane (same entry, or after a merge) is car following
+            if (not table.conflict[route, ro] or not math.isnan(table.merge_at[route, ro])
+                    or self._entry_lane[route] == self._entry_lane[ro]):
+                continue
+            start = table.zone_start[route, ro]
+            if s_front > start:
+                continue
+            occupied = (sim.s[other] + half >= table.zone_start[ro, route]
+                        and sim.s[other] - half <= table.zone_end[ro, route])
+            if not occupied:
+                continue
+            gap = start - STOP_MARGIN_M - s_front
+            if gap < 3.0 * speed + 5.0:
+                best = min(best, -speed * speed / (2.0 * gap) if gap > 0.5 else -MAX_ACCELERATION)
+        return best
 
     def _route_ranks(self) -> np.ndarray:
         """Each route's sign rank as the approach rule judges it (``approach_signs``): the sign now

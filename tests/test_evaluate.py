@@ -58,17 +58,18 @@ def test_table1_scripted_end_to_end(tmp_path):
 
 def test_table1_scripted_with_the_views_sight(tmp_path):
     result = crossway("evaluate", "table1", "--scripted", "--scripted-sight", "view", "--scripted-approach-speed",
-                      "3", "--scripted-approach-signs", "own", "--scenario", "easy", "--episodes", "3", "--workers",
-                      "1", "--out", str(tmp_path))
+                      "3", "--scripted-approach-signs", "own", "--scripted-brake-for-blockers", "--scenario", "easy",
+                      "--episodes", "3", "--workers", "1", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
     report = json.loads((tmp_path / "table1-easy.json").read_text())
     assert report["meta"]["scripted_sight_m"] == 25.0  # half the 50 m view
     assert report["meta"]["scripted_approach_mps"] == 3.0
     assert report["meta"]["scripted_approach_signs"] == "own"
+    assert report["meta"]["scripted_brake_for_blockers"] is True
     alone = crossway("evaluate", "table1", "--scripted", "--scripted-approach-signs", "own", "--out",
                      str(tmp_path / "never"))
     assert alone.returncode == 2 and "--scripted-approach-signs goes with --scripted-approach-speed" in alone.stderr
-    for option in (["--scripted-sight", "view"], ["--scripted-approach-speed", "3"]):
+    for option in (["--scripted-sight", "view"], ["--scripted-approach-speed", "3"], ["--scripted-brake-for-blockers"]):
         refused = crossway("evaluate", "table1", "--checkpoint", str(tmp_path / "x.pt"), *option,
                            "--out", str(tmp_path / "never"))
         assert refused.returncode == 2 and "go with --scripted, not with --checkpoint" in refused.stderr
@@ -122,6 +123,7 @@ def test_right_of_way_scripted_end_to_end(tmp_path):
     limited_summary = json.loads((tmp_path / "view" / "right-of-way-easy.json").read_text())
     assert (limited_summary["scripted_sight"], limited_summary["scripted_approach_mps"]) == ("view", 3.0)
     assert limited_summary["scripted_approach_signs"] == "all"  # the default
+    assert limited_summary["scripted_brake_for_blockers"] is False  # the default
     for run in (summary, limited_summary):  # the anatomy adds up
         assert 0 <= run["infractions_seen_in_time"] <= run["infractions"]
         assert 0 <= run["infractions_offender_crashed"] <= run["infractions"]

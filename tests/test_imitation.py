@@ -136,7 +136,9 @@ def test_a_teacher_with_an_approach_speed_labels_slower_driving():
         mean_speed[approach] = float(trainer.buffer.scalars[: trainer.buffer.added, 0].mean())  # speed input
     assert mean_speed[1.0] < 0.9 * mean_speed[None]  # measured: 6.43 against 7.59 m/s (seed 0)
     own = Pretrainer(PretrainConfig(scenario="easy", teacher_approach_mps=1.0, teacher_approach_signs="own"))
-    assert own.teacher.approach_signs == "own"
+    assert own.teacher.approach_signs == "own" and not own.teacher.brake_for_blockers
+    guarded = Pretrainer(PretrainConfig(scenario="easy", teacher_brake_for_blockers=True))
+    assert guarded.teacher.brake_for_blockers
     with pytest.raises(ValueError, match="teacher_approach_mps"):
         Pretrainer(PretrainConfig(scenario="easy", teacher_approach_mps=0.0))
 

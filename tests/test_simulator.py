@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from conftest import empty_simulator, place, route_index, still
-from simcore.controller import APPROACH_DECELERATION, SPEED_GAIN, STOP_MARGIN_M, ScriptedDriver
+from simcore.controller import (APPROACH_DECELERATION, BLOCKER_PATIENCE_S, SPEED_GAIN, STOP_MARGIN_M, DriverOptions,
+                                ScriptedDriver, scripted_driver)
 from simcore.dynamics import MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
 from simcore.rewards import EndReason
 from simcore.simulator import SimConfig, Simulator
@@ -311,3 +312,52 @@ def test_a_teacher_judging_by_its_own_sign_slows_only_for_routes_an_unsigned_arm
     assert 0 < len(from_right) < len(crossing)
     assert zones[0] == {float(table.zone_start[south_route, r]) for r in from_right}
     assert zones[2] == {float(table.zone_start[south_route, r]) for r in crossing}
+
+
+def test_a_teacher_that_brakes_for_blockers_stops_for_a_car_standing_in_its_zone_even_with_priority(medium_road):
+    """The east car has priority (no sign, from the south car's right); the south car (stop sign)
+    stands inside their conflict zone. Only with brake_for_blockers does the east car stop for it,
+    and only until it has stood BLOCKER_PATIENCE_S itself."""
+    sim = medium_road
+    south_route, east_route = route_index(sim, "south_0", "straight"), route_index(sim, "east_0", "straight")
+    table = sim.priority
+    inside_s = table.zone_start[south_route, east_route] + 1.0  # centre 1 m into the zone: it occupies it
+    south = place(sim, "south_0", "straight", s=inside_s, sign=2, speed=0.0)
+    east = place(sim, "east_0", "straight", s=table.zone_start[east_route, south_route] - 20.0, sign=0, speed=8.0)
+    assert sim.priorities(np.array([south, east]))[0, 1]  # east over south
+    plain = ScriptedDriver(sim).act()[east, 0]
+    guarded = ScriptedDriver(sim, brake_for_blockers=True)
+    assert plain > -2.0  # it has the right of way: it keeps its speed
+    gap_m = table.zone_start[east_route, south_route] - STOP_MARGIN_M - (sim.s[east] + 0.5 * VEHICLE_LENGTH)
+    assert guarded.act()[east, 0] == pytest.approx(-8.0 ** 2 / (2.0 * gap_m))  # a stop at its stop point
+    # the same with the sight of the views (the south car is 20 m ahead and a few metres aside)
+    assert scripted_driver(sim, DriverOptions(sight="view", brake_for_blockers=True)).act()[east, 0] < -2.0
+    # once past the zone's start it clears it rather than stopping inside
+    sim.s[south] = table.zone_end[south_route, east_route] + 0.5 * VEHICLE_LENGTH + 1.0  # the south car left it
+    sim.x[south], sim.y[south] = sim.intersection.routes[south_route].path.position(sim.s[south], 0.0)
+    assert ScriptedDriver(sim, brake_for_blockers=True).act()[east, 0] == pytest.approx(plain)
+    # back in the zone, with the east car standing before it: it waits BLOCKER_PATIENCE_S, then goes
+    sim.s[south] = inside_s
+    sim.x[south], sim.y[south] = sim.intersection.routes[south_route].path.position(inside_s, 0.0)
+    sim.speed[east] = 0.0  # standing at its stop point
+    sim.s[east] = table.zone_start[east_route, south_route] - STOP_MARGIN_M - 0.5 * VEHICLE_LENGTH
+    sim.x[east], sim.y[east] = sim.intersection.routes[east_route].path.position(sim.s[east], 0.0)
+    waiting = ScriptedDriver(sim, brake_for_blockers=True)
+    waiting._standing_s[east] = BLOCKER_PATIENCE_S - 0.5
+    assert waiting.act()[east, 0] == -3.0
+    waiting._standing_s[east] = BLOCKER_PATIENCE_S
+    assert waiting.act()[east, 0] > 0.0
+
+
+def test_driver_options_refuse_unknown_values_and_record_what_the_json_holds():
+    with pytest.raises(ValueError, match="sight"):
+        DriverOptions(sight="half")
+    with pytest.raises(ValueError, match="approach_speed_mps"):
+        DriverOptions(approach_speed_mps=-1.0)
+    with pytest.raises(ValueError, match="approach_signs"):
+        DriverOptions(approach_speed_mps=1.0, approach_signs="some")
+    assert DriverOptions().record() == {"scripted_sight": None, "scripted_approach_mps": None,
+                                        "scripted_approach_signs": None, "scripted_brake_for_blockers": False}
+    assert DriverOptions("view", 2.0, "own", True).record() == {
+        "scripted_sight": "view", "scripted_approach_mps": 2.0, "scripted_approach_signs": "own",
+        "scripted_brake_for_blockers": True}

@@ -110,21 +110,27 @@ def _add_scripted_options(parser) -> None:
                         help="with --scripted-approach-speed: which signs decide the routes that would have "
                              "priority: all (default) the signs now on every arm; own the car's own sign alone, "
                              "every other arm taken as unsigned (what a learner's views show)")
+    parser.add_argument("--scripted-brake-for-blockers", action="store_true",
+                        help="with --scripted: also stop before a conflict zone that a car in sight stands or "
+                             "drives in, even with the right of way (after 8 s standing it goes anyway)")
 
 
 def _scripted_options(args, checkpoint: str | None) -> dict:
     """The scripted driver's options for the evaluation; refuses them with a checkpoint."""
+    from simcore.controller import DriverOptions
+
     if checkpoint is not None and (args.scripted_sight is not None or args.scripted_approach_speed is not None
-                                   or args.scripted_approach_signs is not None):
-        raise ValueError("--scripted-sight, --scripted-approach-speed and --scripted-approach-signs go with "
-                         "--scripted, not with --checkpoint")
+                                   or args.scripted_approach_signs is not None or args.scripted_brake_for_blockers):
+        raise ValueError("--scripted-sight, --scripted-approach-speed, --scripted-approach-signs and "
+                         "--scripted-brake-for-blockers go with --scripted, not with --checkpoint")
     if args.scripted_approach_signs is not None and args.scripted_approach_speed is None:
         raise ValueError("--scripted-approach-signs goes with --scripted-approach-speed")
     if args.scripted_approach_speed is not None and not args.scripted_approach_speed >= 0:
         raise ValueError(f"--scripted-approach-speed must be >= 0 m/s, got {args.scripted_approach_speed}")
-    return {"scripted_sight": args.scripted_sight if args.scripted_sight == "view" else None,
-            "scripted_approach_mps": args.scripted_approach_speed,
-            "scripted_approach_signs": args.scripted_approach_signs or "all"}
+    return {"scripted": DriverOptions(sight=args.scripted_sight or "full",
+                                      approach_speed_mps=args.scripted_approach_speed,
+                                      approach_signs=args.scripted_approach_signs or "all",
+                                      brake_for_blockers=args.scripted_brake_for_blockers)}
 
 
 def _add_run_options(parser, episodes: int, episodes_help: str) -> None:
