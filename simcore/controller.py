@@ -32,8 +32,8 @@ sign): a choice a learner can make from its views.
 
 With ``brake_for_blockers`` it also stops before a conflict zone that a car in sight occupies now,
 whatever the priority: a car standing in the junction is an obstacle, even for a car with the
-right of way (docs/training.md measures that most crashes of the view-limited driver on easy were
-a car with priority running into one that had stopped inside its zone). After standing
+right of way (docs/scripts/crash_kinds.py: most crashes of the view-limited driver on easy were a
+car with priority running into one that had entered their conflict zone first). After standing
 ``BLOCKER_PATIENCE_S`` it goes anyway: three cars can each stand in the zone of the next.
 """
 
@@ -58,7 +58,7 @@ VIEW_SIGHT_M = 0.5 * VIEW_EXTENT_M  # half-side of the square the paper's views 
 APPROACH_DECELERATION = 2.0  # comfortable braking towards a conflict zone's approach speed [m/s^2]
 APPROACH_SIGNS = ("all", "own")  # which signs decide the zones to approach slowly (ScriptedDriver)
 SIGHTS = ("full", "view")  # what the scripted driver sees (DriverOptions.sight)
-BLOCKER_PATIENCE_S = 8.0  # after standing this long, ignore cars standing in its way (brake_for_blockers) [s]
+BLOCKER_PATIENCE_S = 8.0  # after standing this long, ignore the cars in its way (brake_for_blockers) [s]
 
 
 def view_sight(sim: Simulator) -> dict[str, float]:
