@@ -33,7 +33,6 @@ from simcore.controller import SIGHTS
 PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
                     "action_loss_sa", "value_loss_acc", "value_loss_sa", "student_episodes",
                     "student_reach_rate", "teacher_episodes", "teacher_reach_rate")
-TEACHER_SIGHTS = SIGHTS  # the teacher's sight (simcore.controller.DriverOptions.sight)
 ROLLING_EPISODES = 200  # reach rates are over each driver's last this many finished episodes
 
 
@@ -88,10 +87,13 @@ class Pretrainer:
         if (config.minutes <= 0 or config.rounds < 0 or config.steps_per_round < 1 or config.batch_size < 1
                 or config.reuse <= 0):
             raise ValueError("minutes, steps_per_round, batch_size and reuse must be positive")
-        if config.teacher_sight not in TEACHER_SIGHTS:
-            raise ValueError(f"teacher_sight must be one of {TEACHER_SIGHTS}, got {config.teacher_sight!r}")
+        if config.teacher_sight not in SIGHTS:
+            raise ValueError(f"teacher_sight must be one of {SIGHTS}, got {config.teacher_sight!r}")
         if config.teacher_approach_mps is not None and not 0.0 < config.teacher_approach_mps < float("inf"):
             raise ValueError(f"teacher_approach_mps must be > 0 m/s or None, got {config.teacher_approach_mps}")
+        teacher_options = DriverOptions(  # refuses an unknown approach_signs before anything is built
+            sight=config.teacher_sight, approach_speed_mps=config.teacher_approach_mps,
+            approach_signs=config.teacher_approach_signs, brake_for_blockers=config.teacher_brake_for_blockers)
         if not config.teacher_half_life > 0:
             raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
         if not config.brake_weight > 0:
@@ -110,9 +112,7 @@ class Pretrainer:
             self.averaged = {name: p.detach().clone() for name, p in self.policy.named_parameters()}
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
-        self.teacher = scripted_driver(self.sim, DriverOptions(
-            sight=config.teacher_sight, approach_speed_mps=config.teacher_approach_mps,
-            approach_signs=config.teacher_approach_signs, brake_for_blockers=config.teacher_brake_for_blockers))
+        self.teacher = scripted_driver(self.sim, teacher_options)
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()
