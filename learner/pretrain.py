@@ -55,6 +55,10 @@ class PretrainConfig:
     teacher_approach_signs: str = "all"
     # the teacher also stops before a conflict zone a car in sight occupies, whatever the priority
     teacher_brake_for_blockers: bool = False
+    # the teacher never stops inside another route's conflict zone (before the first of overlapping ones)
+    teacher_wait_outside_zones: bool = False
+    # the teacher goes ahead of a car with priority that waits, through a chain of cars, for it
+    teacher_break_wait_cycles: bool = False
     teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
     brake_weight: float = 1.0  # weight of the teacher's hard-braking labels in the action loss (imitation_loss)
     buffer_samples: int = 40_000  # replay capacity, 28 KB per sample
@@ -93,7 +97,8 @@ class Pretrainer:
             raise ValueError(f"teacher_approach_mps must be > 0 m/s or None, got {config.teacher_approach_mps}")
         teacher_options = DriverOptions(  # refuses an unknown approach_signs before anything is built
             sight=config.teacher_sight, approach_speed_mps=config.teacher_approach_mps,
-            approach_signs=config.teacher_approach_signs, brake_for_blockers=config.teacher_brake_for_blockers)
+            approach_signs=config.teacher_approach_signs, brake_for_blockers=config.teacher_brake_for_blockers,
+            wait_outside_zones=config.teacher_wait_outside_zones, break_wait_cycles=config.teacher_break_wait_cycles)
         if not config.teacher_half_life > 0:
             raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
         if not config.brake_weight > 0:
@@ -233,6 +238,8 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     approach = ("" if config.teacher_approach_mps is None else
                 f", approach {config.teacher_approach_mps:g} m/s by {config.teacher_approach_signs} signs")
     approach += ", brakes for blockers" if config.teacher_brake_for_blockers else ""
+    approach += ", waits outside zones" if config.teacher_wait_outside_zones else ""
+    approach += ", breaks wait cycles" if config.teacher_break_wait_cycles else ""
     log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}{approach}), "
         f"buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")

@@ -35,10 +35,19 @@ whatever the priority: a car standing in the junction is an obstacle, even for a
 right of way (docs/scripts/crash_kinds.py: most crashes of the view-limited driver on easy were a
 car with priority running into one that had entered their conflict zone first). After standing
 ``BLOCKER_PATIENCE_S`` it goes anyway: three cars can each stand in the zone of the next.
+
+With ``wait_outside_zones`` it never plans to stand inside a conflict zone: when the point where it
+would stop (for a car with priority, or for a blocker) leaves its body inside the zone of another
+crossing route, it stops before that zone instead (and so on, back to the first zone of a chain of
+overlapping ones). On hard the stop lines lie 21 m from the centre and the zones overlap, so a
+driver that stops right before each zone stands in others, and with ``brake_for_blockers`` the
+cars lock each other (docs/training.md, session 15). A car already inside such a zone stops where
+it had planned.
 """
 
 from __future__ import annotations
 
+import collections
 import math
 from dataclasses import dataclass
 
@@ -58,7 +67,20 @@ VIEW_SIGHT_M = 0.5 * VIEW_EXTENT_M  # half-side of the square the paper's views 
 APPROACH_DECELERATION = 2.0  # comfortable braking towards a conflict zone's approach speed [m/s^2]
 APPROACH_SIGNS = ("all", "own")  # which signs decide the zones to approach slowly (ScriptedDriver)
 SIGHTS = ("full", "view")  # what the scripted driver sees (DriverOptions.sight)
+STANDING_MPS = 0.5  # a car slower than this stands (patience counts) [m/s]
 BLOCKER_PATIENCE_S = 8.0  # after standing this long, ignore the cars in its way (brake_for_blockers) [s]
+
+
+def _reachable(edges: dict[int, set[int]], start: int) -> set[int]:
+    """The nodes reachable from ``start`` along ``edges`` in one step or more (depth-first)."""
+    seen: set[int] = set()
+    stack = [start]
+    while stack:
+        for nxt in edges.get(stack.pop(), ()):
+            if nxt not in seen:
+                seen.add(nxt)
+                stack.append(nxt)
+    return seen
 
 
 def view_sight(sim: Simulator) -> dict[str, float]:
@@ -76,6 +98,8 @@ class DriverOptions:
     approach_speed_mps: float | None = None  # slow to this speed before zones of routes that may have priority
     approach_signs: str = "all"  # which signs decide those zones (ScriptedDriver.approach_signs)
     brake_for_blockers: bool = False  # stop before a zone a car in sight occupies, whatever the priority
+    wait_outside_zones: bool = False  # never plan a stop that leaves the car inside another conflict zone
+    break_wait_cycles: bool = False  # go ahead of a car with priority that waits, through others, for this one
 
     def __post_init__(self):
         if self.sight not in SIGHTS:
@@ -90,7 +114,9 @@ class DriverOptions:
         return {"scripted_sight": self.sight if self.sight == "view" else None,
                 "scripted_approach_mps": self.approach_speed_mps,
                 "scripted_approach_signs": self.approach_signs if self.approach_speed_mps is not None else None,
-                "scripted_brake_for_blockers": self.brake_for_blockers}
+                "scripted_brake_for_blockers": self.brake_for_blockers,
+                "scripted_wait_outside_zones": self.wait_outside_zones,
+                "scripted_break_wait_cycles": self.break_wait_cycles}
 
 
 def scripted_driver(sim: Simulator, options: DriverOptions | None = None) -> "ScriptedDriver":
@@ -98,7 +124,8 @@ def scripted_driver(sim: Simulator, options: DriverOptions | None = None) -> "Sc
     car in sight); sight "view" limits it to what ``sim``'s learners see (``view_sight``)."""
     options = options or DriverOptions()
     return ScriptedDriver(sim, approach_speed_mps=options.approach_speed_mps, approach_signs=options.approach_signs,
-                          brake_for_blockers=options.brake_for_blockers,
+                          brake_for_blockers=options.brake_for_blockers, wait_outside_zones=options.wait_outside_zones,
+                          break_wait_cycles=options.break_wait_cycles,
                           **(view_sight(sim) if options.sight == "view" else {}))
 
 
@@ -107,7 +134,8 @@ class ScriptedDriver:
 
     def __init__(self, sim: Simulator, speed_fraction: float = 0.9, yield_to_priority: bool = True,
                  sight_m: float | None = None, approach_speed_mps: float | None = None,
-                 sight_shift_m: float = 0.0, approach_signs: str = "all", brake_for_blockers: bool = False):
+                 sight_shift_m: float = 0.0, approach_signs: str = "all", brake_for_blockers: bool = False,
+                 wait_outside_zones: bool = False, break_wait_cycles: bool = False):
         if sight_m is not None and not sight_m > 0:
             raise ValueError(f"sight_m must be > 0 m or None, got {sight_m}")
         if not math.isfinite(sight_shift_m):
@@ -118,6 +146,8 @@ class ScriptedDriver:
             raise ValueError(f"approach_signs must be one of {APPROACH_SIGNS}, got {approach_signs!r}")
         self.approach_signs = approach_signs
         self.brake_for_blockers = brake_for_blockers
+        self.wait_outside_zones = wait_outside_zones
+        self.break_wait_cycles = break_wait_cycles
         # speed at the stop point of a conflict zone with a route that may have priority [m/s]
         self.approach_speed_mps = approach_speed_mps
         self.sim = sim
@@ -129,6 +159,12 @@ class ScriptedDriver:
         lanes = sim.intersection.lanes
         self._entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])  # per route
         self._entry_branch = np.array([lanes[e].branch for e in self._entry_lane])  # per route
+        # per route: (starts, ends) [m] of its conflict zones with crossing routes from other lanes
+        table = sim.priority
+        crossing = (table.conflict & np.isnan(table.merge_at)
+                    & (self._entry_lane[:, None] != self._entry_lane[None, :]))
+        self._crossing_zones = [(table.zone_start[r][crossing[r]], table.zone_end[r][crossing[r]])
+                                for r in range(len(self._entry_lane))]
 
     def act(self) -> np.ndarray:
         sim = self.sim
@@ -146,6 +182,8 @@ class ScriptedDriver:
             route_rank = self._route_ranks()
         merge_at = sim.priority.merge_at
         half = 0.5 * VEHICLE_LENGTH
+        waits_for: dict[int, set[int]] = collections.defaultdict(set)  # car -> cars it stops or follows for
+        yields: dict[int, list[tuple[int, float]]] = collections.defaultdict(list)  # car -> (car, braking)
         for a, slot in enumerate(idx.tolist()):
             if slot >= sim.num_slots:
                 continue  # traffic drives itself
@@ -160,6 +198,8 @@ class ScriptedDriver:
             desired = self.speed_fraction * sim.target_speed[slot]
             if self.approach_speed_mps is not None:
                 zones = self._yield_zones(slot, route_rank)
+                if self.wait_outside_zones:  # it slows for where it would stop: a chain's first zone
+                    zones = np.array([self._stop_before(sim.route[slot], z, -math.inf) for z in zones])
                 upcoming = zones[zones >= s_front]
                 if len(upcoming):
                     room = max(float(upcoming.min()) - STOP_MARGIN_M - s_front, 0.0)
@@ -176,21 +216,40 @@ class ScriptedDriver:
                     gap = ahead - VEHICLE_LENGTH - FOLLOW_GAP_M
                     if gap < 2.0 * speed:
                         acceleration = min(acceleration, SPEED_GAIN * (sim.speed[other] - speed) + 0.5 * gap)
+                        waits_for[slot].add(other)
                     continue
-                gap = zone_start[sim.route[slot], sim.route[other]] - STOP_MARGIN_M - s_front
                 if s_front > zone_start[sim.route[slot], sim.route[other]]:
                     continue  # already in the zone: clear it
+                gap = self._stop_before(sim.route[slot], zone_start[sim.route[slot], sim.route[other]], s_front) \
+                    - STOP_MARGIN_M - s_front
                 other_gap = zone_start[sim.route[other], sim.route[slot]] - (sim.s[other] + half)
                 # far away, even at its target speed: a car waiting at its line for a third one is near
                 if other_gap > YIELD_HORIZON_S * max(sim.speed[other], sim.target_speed[other]):
                     continue
                 if gap < 3.0 * speed + 5.0:
                     braking = -speed * speed / (2.0 * gap) if gap > 0.5 else -MAX_ACCELERATION
-                    acceleration = min(acceleration, braking)
+                    if self.break_wait_cycles:
+                        yields[slot].append((other, braking))  # applied below, unless it closes a cycle
+                        waits_for[slot].add(other)
+                    else:
+                        acceleration = min(acceleration, braking)
+                elif self.break_wait_cycles:
+                    waits_for[slot].add(other)  # not braking yet, but it will
             if self.brake_for_blockers and self._standing_s[slot] < BLOCKER_PATIENCE_S:
-                acceleration = min(acceleration, self._blocker_braking(slot, idx, sight[a], speed, s_front))
+                braking, occupants = self._blocker_braking(slot, idx, sight[a], speed, s_front)
+                acceleration = min(acceleration, braking)
+                waits_for[slot].update(occupants)
             actions[slot] = (acceleration, steering)
-        standing = learners & (sim.speed[: sim.num_slots] < 0.5)
+        if self.break_wait_cycles:
+            for slot, brakings in yields.items():
+                # a car with priority that waits, through a chain of cars, for this one would wait
+                # for ever: every car of such a cycle stops yielding to the others in it (its braking
+                # for blockers and for cars ahead on a shared lane stays and keeps them apart;
+                # freeing only one car per cycle measured worse on hard: docs/training.md)
+                for other, braking in brakings:
+                    if slot not in _reachable(waits_for, other):
+                        actions[slot, 0] = min(actions[slot, 0], braking)
+        standing = learners & (sim.speed[: sim.num_slots] < STANDING_MPS)
         self._standing_s[standing] += DT
         self._standing_s[~standing] = 0.0
         np.clip(actions[:, 0], -MAX_ACCELERATION, MAX_ACCELERATION, out=actions[:, 0])
@@ -198,13 +257,15 @@ class ScriptedDriver:
         return actions
 
     def _blocker_braking(self, slot: int, idx: np.ndarray, in_sight: np.ndarray, speed: float,
-                         s_front: float) -> float:
+                         s_front: float) -> tuple[float, list[int]]:
         """Braking [m/s^2] to stop before a conflict zone that a car in sight occupies now, whatever
-        the priority (a car standing in the junction is an obstacle); +inf when none."""
+        the priority (a car standing in the junction is an obstacle), +inf when none; and the cars
+        in sight that occupy a zone ahead of it, near or far."""
         sim, table = self.sim, self.sim.priority
         half = 0.5 * VEHICLE_LENGTH
         route = sim.route[slot]
         best = math.inf
+        occupants: list[int] = []
         for b, other in enumerate(idx.tolist()):
             if other == slot or not in_sight[b]:
                 continue
@@ -220,10 +281,28 @@ class ScriptedDriver:
                         and sim.s[other] - half <= table.zone_end[ro, route])
             if not occupied:
                 continue
-            gap = start - STOP_MARGIN_M - s_front
+            gap = self._stop_before(route, start, s_front) - STOP_MARGIN_M - s_front
             if gap < 3.0 * speed + 5.0:
                 best = min(best, -speed * speed / (2.0 * gap) if gap > 0.5 else -MAX_ACCELERATION)
-        return best
+            occupants.append(other)
+        return best, occupants
+
+    def _stop_before(self, route: int, zone_start_m: float, s_front: float) -> float:
+        """Arc length [m] of the zone start to stop before, on ``route``, for a zone beginning at
+        ``zone_start_m``: itself, or with ``wait_outside_zones`` the start of an earlier zone the
+        car would otherwise stand in (repeated along a chain of overlapping zones) unless the car's
+        front ``s_front`` is already past that start."""
+        if not self.wait_outside_zones:
+            return zone_start_m
+        starts, ends = self._crossing_zones[route]
+        stop = zone_start_m
+        while True:
+            front = stop - STOP_MARGIN_M  # the car's body when standing there: [front - length, front]
+            inside = (starts < front) & (ends > front - VEHICLE_LENGTH) & (starts < stop)
+            if not inside.any():
+                break
+            stop = float(starts[inside].min())
+        return stop if s_front <= stop else zone_start_m
 
     def _route_ranks(self) -> np.ndarray:
         """Each route's sign rank as the approach rule judges it (``approach_signs``): the sign now

@@ -113,6 +113,12 @@ def _add_scripted_options(parser) -> None:
     parser.add_argument("--scripted-brake-for-blockers", action="store_true",
                         help="with --scripted: also stop before a conflict zone that a car in sight stands or "
                              "drives in, even with the right of way (after 8 s standing it goes anyway)")
+    parser.add_argument("--scripted-wait-outside-zones", action="store_true",
+                        help="with --scripted: never stop with the body inside another route's conflict zone; "
+                             "stop before the first of overlapping zones instead (hard's zones overlap)")
+    parser.add_argument("--scripted-break-wait-cycles", action="store_true",
+                        help="with --scripted: go ahead of a car with priority that waits, through a chain of "
+                             "cars, for this one (else the chain waits for ever)")
 
 
 def _scripted_options(args, checkpoint: str | None) -> dict:
@@ -120,9 +126,11 @@ def _scripted_options(args, checkpoint: str | None) -> dict:
     from simcore.controller import DriverOptions
 
     if checkpoint is not None and (args.scripted_sight is not None or args.scripted_approach_speed is not None
-                                   or args.scripted_approach_signs is not None or args.scripted_brake_for_blockers):
-        raise ValueError("--scripted-sight, --scripted-approach-speed, --scripted-approach-signs and "
-                         "--scripted-brake-for-blockers go with --scripted, not with --checkpoint")
+                                   or args.scripted_approach_signs is not None or args.scripted_brake_for_blockers
+                                   or args.scripted_wait_outside_zones or args.scripted_break_wait_cycles):
+        raise ValueError("--scripted-sight, --scripted-approach-speed, --scripted-approach-signs, "
+                         "--scripted-brake-for-blockers, --scripted-wait-outside-zones and "
+                         "--scripted-break-wait-cycles go with --scripted, not with --checkpoint")
     if args.scripted_approach_signs is not None and args.scripted_approach_speed is None:
         raise ValueError("--scripted-approach-signs goes with --scripted-approach-speed")
     if args.scripted_approach_speed is not None and not args.scripted_approach_speed >= 0:
@@ -130,7 +138,9 @@ def _scripted_options(args, checkpoint: str | None) -> dict:
     return {"scripted": DriverOptions(sight=args.scripted_sight or "full",
                                       approach_speed_mps=args.scripted_approach_speed,
                                       approach_signs=args.scripted_approach_signs or "all",
-                                      brake_for_blockers=args.scripted_brake_for_blockers)}
+                                      brake_for_blockers=args.scripted_brake_for_blockers,
+                                      wait_outside_zones=args.scripted_wait_outside_zones,
+                                      break_wait_cycles=args.scripted_break_wait_cycles)}
 
 
 def _add_run_options(parser, episodes: int, episodes_help: str) -> None:

@@ -56,6 +56,12 @@ def add_parser(subparsers) -> None:
                         help="the teacher also stops before a conflict zone that a car in sight stands or drives "
                              "in, even with the right of way (after 8 s standing it goes anyway): on easy it "
                              "halves the crashes of --teacher-sight view (docs/training.md)")
+    parser.add_argument("--teacher-wait-outside-zones", action="store_true",
+                        help="the teacher never stops with its body inside another route's conflict zone; it "
+                             "stops before the first of overlapping zones instead (hard's zones overlap)")
+    parser.add_argument("--teacher-break-wait-cycles", action="store_true",
+                        help="the teacher goes ahead of a car with priority that waits, through a chain of cars, "
+                             "for it: with --teacher-brake-for-blockers the cars on hard otherwise lock each other")
     parser.add_argument("--teacher-half-life", type=float, default=20_000.0, metavar="SAMPLES",
                         help="a new episode is driven by the teacher with probability 0.5**(samples collected / "
                              "SAMPLES), by the network otherwise (DAgger); 'inf': always the teacher")
@@ -117,6 +123,8 @@ def run(args) -> int:
         reuse=args.reuse, batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef,
         gamma=args.gamma, teacher_sight=args.teacher_sight, teacher_approach_mps=args.teacher_approach_speed,
         teacher_approach_signs=args.teacher_approach_signs, teacher_brake_for_blockers=args.teacher_brake_for_blockers,
+        teacher_wait_outside_zones=args.teacher_wait_outside_zones,
+        teacher_break_wait_cycles=args.teacher_break_wait_cycles,
         teacher_half_life=args.teacher_half_life,
         brake_weight=args.brake_weight,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
