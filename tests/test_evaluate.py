@@ -58,7 +58,8 @@ def test_table1_scripted_end_to_end(tmp_path):
 
 def test_table1_scripted_with_the_views_sight(tmp_path):
     result = crossway("evaluate", "table1", "--scripted", "--scripted-sight", "view", "--scripted-approach-speed",
-                      "3", "--scripted-approach-signs", "own", "--scripted-brake-for-blockers", "--scenario", "easy",
+                      "3", "--scripted-approach-signs", "own", "--scripted-brake-for-blockers",
+                      "--scripted-wait-outside-zones", "--scripted-break-wait-cycles", "--scenario", "easy",
                       "--episodes", "3", "--workers", "1", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
     report = json.loads((tmp_path / "table1-easy.json").read_text())
@@ -66,10 +67,12 @@ def test_table1_scripted_with_the_views_sight(tmp_path):
     assert report["meta"]["scripted_approach_mps"] == 3.0
     assert report["meta"]["scripted_approach_signs"] == "own"
     assert report["meta"]["scripted_brake_for_blockers"] is True
+    assert report["meta"]["scripted_wait_outside_zones"] is True and report["meta"]["scripted_break_wait_cycles"]
     alone = crossway("evaluate", "table1", "--scripted", "--scripted-approach-signs", "own", "--out",
                      str(tmp_path / "never"))
     assert alone.returncode == 2 and "--scripted-approach-signs goes with --scripted-approach-speed" in alone.stderr
-    for option in (["--scripted-sight", "view"], ["--scripted-approach-speed", "3"], ["--scripted-brake-for-blockers"]):
+    for option in (["--scripted-sight", "view"], ["--scripted-approach-speed", "3"], ["--scripted-brake-for-blockers"],
+                   ["--scripted-wait-outside-zones"], ["--scripted-break-wait-cycles"]):
         refused = crossway("evaluate", "table1", "--checkpoint", str(tmp_path / "x.pt"), *option,
                            "--out", str(tmp_path / "never"))
         assert refused.returncode == 2 and "go with --scripted, not with --checkpoint" in refused.stderr

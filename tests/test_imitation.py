@@ -138,7 +138,10 @@ def test_a_teacher_with_an_approach_speed_labels_slower_driving():
     own = Pretrainer(PretrainConfig(scenario="easy", teacher_approach_mps=1.0, teacher_approach_signs="own"))
     assert own.teacher.approach_signs == "own" and not own.teacher.brake_for_blockers
     guarded = Pretrainer(PretrainConfig(scenario="easy", teacher_brake_for_blockers=True))
-    assert guarded.teacher.brake_for_blockers
+    assert guarded.teacher.brake_for_blockers and not guarded.teacher.wait_outside_zones
+    untangled = Pretrainer(PretrainConfig(scenario="easy", teacher_wait_outside_zones=True,
+                                          teacher_break_wait_cycles=True))
+    assert untangled.teacher.wait_outside_zones and untangled.teacher.break_wait_cycles
     with pytest.raises(ValueError, match="teacher_approach_mps"):
         Pretrainer(PretrainConfig(scenario="easy", teacher_approach_mps=0.0))
 

@@ -349,6 +349,60 @@ def test_a_teacher_that_brakes_for_blockers_stops_for_a_car_standing_in_its_zone
     assert waiting.act()[east, 0] > 0.0
 
 
+def test_a_driver_that_waits_outside_zones_stops_before_the_first_of_overlapping_zones():
+    """On hard the zones overlap: the stop point for a zone nested in another leaves the car's body
+    inside the outer one. With wait_outside_zones the east car (stop sign) stops before the outer
+    zone for a car with priority; once its front is past that zone's start, before the zone itself."""
+    sim = empty_simulator("hard")
+    ego_route = route_index(sim, "east_0", "straight")
+    table = sim.priority
+    driver = ScriptedDriver(sim, wait_outside_zones=True)
+    starts, ends = driver._crossing_zones[ego_route]
+    nested = [r for r in range(len(sim.intersection.routes)) if table.conflict[ego_route, r]
+              and np.isnan(table.merge_at[ego_route, r])
+              and driver._stop_before(ego_route, table.zone_start[ego_route, r], 0.0) < table.zone_start[ego_route, r]]
+    assert nested  # hard has such zones
+    other_route = nested[0]
+    zone = table.zone_start[ego_route, other_route]
+    moved = driver._stop_before(ego_route, zone, 0.0)
+    assert moved in set(starts.tolist())  # the start of another crossing zone
+    front = moved - STOP_MARGIN_M  # the body standing there lies outside every crossing zone
+    assert not np.any((starts < front) & (ends > front - VEHICLE_LENGTH))
+    assert ScriptedDriver(sim)._stop_before(ego_route, zone, 0.0) == zone  # the option off: unchanged
+    # in act(): a car with priority (no sign) 20 m before its zone, the east car (stop sign) at 8 m/s
+    other_lane = sim.intersection.lanes[sim.intersection.routes[other_route].entry_lane].name
+    other_turn = sim.intersection.routes[other_route].turn
+    half = 0.5 * VEHICLE_LENGTH
+    place(sim, other_lane, other_turn, s=table.zone_start[other_route, ego_route] - 20.0 - half, sign=0, speed=8.0)
+    east = place(sim, "east_0", "straight", s=moved - STOP_MARGIN_M - half - 12.0, sign=2, speed=8.0,
+                 target_speed=9.0)  # free driving would accelerate
+    s_front = sim.s[east] + half
+    plain = ScriptedDriver(sim).act()[east, 0]
+    assert plain == pytest.approx(-8.0 ** 2 / (2.0 * (zone - STOP_MARGIN_M - s_front)))
+    assert ScriptedDriver(sim, wait_outside_zones=True).act()[east, 0] == pytest.approx(-8.0 ** 2 / (2.0 * 12.0))
+    # past the outer zone's start it can no longer stop before it: it stops before the zone itself
+    assert driver._stop_before(ego_route, zone, moved + 0.5) == zone
+
+
+def test_cars_in_a_cycle_of_priority_stop_yielding_to_each_other_with_break_wait_cycles(medium_road):
+    """Three cars with yield signs on medium: south yields to east (from its right), east (turning
+    left) to west (straight, from ahead), west to south (from its right). Each waits for the next:
+    with break_wait_cycles they stop yielding to each other; without the third car, no cycle."""
+    sim = medium_road
+    east = place(sim, "east_0", "left", s=15.7, sign=1, speed=7.5, target_speed=8.4)
+    west = place(sim, "west_0", "straight", s=15.8, sign=1, speed=7.4, target_speed=8.3)
+    south = place(sim, "south_0", "straight", s=17.9, sign=1, speed=7.5, target_speed=9.9)
+    higher = sim.priorities(np.array([south, east, west]))  # [i, j]: j has priority over i
+    assert higher[0, 1] and higher[1, 2] and higher[2, 0]
+    plain = ScriptedDriver(sim).act()
+    untangled = ScriptedDriver(sim, break_wait_cycles=True).act()
+    assert plain[south, 0] < 0.0 and plain[east, 0] < 0.0  # each brakes for the next one
+    for car, target in ((south, 9.9), (east, 8.4)):  # free driving: speed kept at 0.9 of the target
+        assert untangled[car, 0] == pytest.approx(SPEED_GAIN * (0.9 * target - sim.speed[car]))
+    sim.present[west] = False  # no cycle left: south yields to east as before
+    assert ScriptedDriver(sim, break_wait_cycles=True).act()[south, 0] == pytest.approx(ScriptedDriver(sim).act()[south, 0])
+
+
 def test_driver_options_refuse_unknown_values_and_record_what_the_json_holds():
     with pytest.raises(ValueError, match="sight"):
         DriverOptions(sight="half")
@@ -357,7 +411,8 @@ def test_driver_options_refuse_unknown_values_and_record_what_the_json_holds():
     with pytest.raises(ValueError, match="approach_signs"):
         DriverOptions(approach_speed_mps=1.0, approach_signs="some")
     assert DriverOptions().record() == {"scripted_sight": None, "scripted_approach_mps": None,
-                                        "scripted_approach_signs": None, "scripted_brake_for_blockers": False}
-    assert DriverOptions("view", 2.0, "own", True).record() == {
+                                        "scripted_approach_signs": None, "scripted_brake_for_blockers": False,
+                                        "scripted_wait_outside_zones": False, "scripted_break_wait_cycles": False}
+    assert DriverOptions("view", 2.0, "own", True, True, True).record() == {
         "scripted_sight": "view", "scripted_approach_mps": 2.0, "scripted_approach_signs": "own",
-        "scripted_brake_for_blockers": True}
+        "scripted_brake_for_blockers": True, "scripted_wait_outside_zones": True, "scripted_break_wait_cycles": True}
