@@ -42,7 +42,15 @@ crossing route, it stops before that zone instead (and so on, back to the first 
 overlapping ones). On hard the stop lines lie 21 m from the centre and the zones overlap, so a
 driver that stops right before each zone stands in others, and with ``brake_for_blockers`` the
 cars lock each other (docs/training.md, session 15). A car already inside such a zone stops where
-it had planned.
+it had planned. The approach slowing then applies only at those stop points: a car that has
+entered a chain of zones crosses it at its cruising speed.
+
+With ``break_wait_cycles`` it draws, each step, who waits for whom (a car with priority it yields
+to within the yield horizon, a car it follows on a shared lane, a car in sight occupying a zone
+ahead of it), and a car stops yielding to a car with priority that waits, through that graph, for
+the car itself: otherwise the cycle waits for ever, or until a patience runs out. Every car of a
+cycle is freed so; their braking for blockers still keeps them apart. The graph reads every car's
+state (privileged, like the priorities themselves).
 """
 
 from __future__ import annotations

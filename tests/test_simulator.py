@@ -8,7 +8,7 @@ import pytest
 from conftest import empty_simulator, place, route_index, still
 from simcore.controller import (APPROACH_DECELERATION, BLOCKER_PATIENCE_S, SPEED_GAIN, STOP_MARGIN_M, DriverOptions,
                                 ScriptedDriver, scripted_driver)
-from simcore.dynamics import MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
+from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
 from simcore.rewards import EndReason
 from simcore.simulator import SimConfig, Simulator
 
@@ -382,6 +382,27 @@ def test_a_driver_that_waits_outside_zones_stops_before_the_first_of_overlapping
     assert ScriptedDriver(sim, wait_outside_zones=True).act()[east, 0] == pytest.approx(-8.0 ** 2 / (2.0 * 12.0))
     # past the outer zone's start it can no longer stop before it: it stops before the zone itself
     assert driver._stop_before(ego_route, zone, moved + 0.5) == zone
+
+
+def test_a_driver_that_waits_outside_zones_slows_only_before_a_chain_of_zones_not_inside_it():
+    """Hard's straight route from the east inner lane crosses one chain of overlapping zones. A
+    stop-sign car judging by its own sign, 1 m into the chain's first zone: without the option it
+    slows towards the next zone's stop point; with it, it cannot stop inside the chain, so it
+    drives on at its cruising speed."""
+    sim = empty_simulator("hard")
+    ego_route = route_index(sim, "east_0", "straight")
+    driver = ScriptedDriver(sim, approach_speed_mps=2.0, approach_signs="own", wait_outside_zones=True)
+    starts, _ = driver._crossing_zones[ego_route]
+    chain_start = float(starts.min())
+    assert all(driver._stop_before(ego_route, z, -math.inf) == chain_start for z in starts.tolist())  # one chain
+    half = 0.5 * VEHICLE_LENGTH
+    east = place(sim, "east_0", "straight", s=chain_start + 1.0 - half, sign=2, speed=5.0, target_speed=8.0)
+    cruising = min(SPEED_GAIN * (0.9 * 8.0 - 5.0), MAX_ACCELERATION)
+    next_zone = float(starts[starts > chain_start + 1.0].min())
+    aimed = math.sqrt(2.0 ** 2 + 2.0 * APPROACH_DECELERATION * (next_zone - STOP_MARGIN_M - (chain_start + 1.0)))
+    plain = ScriptedDriver(sim, approach_speed_mps=2.0, approach_signs="own").act()[east, 0]
+    assert plain == pytest.approx(min(SPEED_GAIN * (aimed - 5.0), cruising)) and plain < cruising
+    assert driver.act()[east, 0] == pytest.approx(cruising)
 
 
 def test_cars_in_a_cycle_of_priority_stop_yielding_to_each_other_with_break_wait_cycles(medium_road):
