@@ -17,7 +17,7 @@ one forward and backward pass costs about 0.6-0.8 ms per sample on one core as t
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +28,7 @@ from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING
 from simcore.views import VIEW_EXTENT_M
 
 VIEW_SHAPE = (16, 84, 84)
+CONV2_CELLS = 10 * 10  # the second convolution's output grid over 84 x 84 views
 SPEED_SCALE = 10.0  # speeds are divided by this before entering the network [m/s]
 ACTION_SCALE = np.array([MAX_ACCELERATION, MAX_STEERING], dtype=np.float32)  # [m/s^2, rad]
 # the view square (side, centre ahead of the car) [m] of a file that does not record one: every
@@ -51,7 +52,7 @@ class SubModule(nn.Module):
         super().__init__()
         self.conv1 = nn.Conv2d(VIEW_SHAPE[0], config.conv1_channels, kernel_size=4, stride=4)
         self.conv2 = nn.Conv2d(config.conv1_channels, config.conv2_channels, kernel_size=3, stride=2)
-        self.hidden = nn.Linear(config.conv2_channels * 10 * 10 + 2, config.hidden)
+        self.hidden = nn.Linear(config.conv2_channels * CONV2_CELLS + 2, config.hidden)
         self.mu = nn.Linear(config.hidden, 1)
         self.value = nn.Linear(config.hidden, 1)
         nn.init.uniform_(self.mu.weight, -3e-3, 3e-3)  # start near mu = 0: explore symmetrically
@@ -77,6 +78,46 @@ class Policy(nn.Module):
         mu_acc, v_acc = self.acc(views, scalars)
         mu_sa, v_sa = self.sa(views, scalars)
         return mu_acc, v_acc, mu_sa, v_sa
+
+
+def widen(policy: Policy, config: PolicyConfig, seed: int = 0) -> Policy:
+    """A network of the (larger or equal) sizes ``config`` that computes exactly ``policy``'s function.
+
+    Every old unit keeps its weights; every new unit gets the random weights a fresh network of
+    those sizes would start with on its inputs and zero weights on its outputs, so it changes no
+    output until training moves those (new units with zero fan-out; Chen et al. 2016, "Net2Net",
+    reach the same end by copying units). The old units also get zero weights from the new units
+    below them. Refuses a ``config`` smaller than the policy's in any layer.
+    """
+    old = policy.config
+    sizes = ("conv1_channels", "conv2_channels", "hidden")
+    if any(getattr(config, name) < getattr(old, name) for name in sizes):
+        raise ValueError(f"cannot widen the network {asdict(old)} to the smaller {asdict(config)}")
+    with torch.random.fork_rng(devices=[]):  # the caller's random stream stays as it was
+        torch.manual_seed(seed)
+        wide = Policy(config)
+    c1, c2, h = old.conv1_channels, old.conv2_channels, old.hidden
+    features = CONV2_CELLS * c2  # the old hidden layer's inputs from the views; the two speeds follow
+    wide_features = CONV2_CELLS * config.conv2_channels
+    with torch.no_grad():
+        for head in ("acc", "sa"):
+            new, was = getattr(wide, head), getattr(policy, head)
+            new.conv1.weight[:c1] = was.conv1.weight
+            new.conv1.bias[:c1] = was.conv1.bias
+            new.conv2.weight[:c2] = 0.0  # old channels read nothing from new conv1 channels
+            new.conv2.weight[:c2, :c1] = was.conv2.weight
+            new.conv2.bias[:c2] = was.conv2.bias
+            new.hidden.weight[:h] = 0.0  # old units read nothing from new conv2 channels
+            new.hidden.weight[:h, :features] = was.hidden.weight[:, :features]  # channel-major, as flattened
+            new.hidden.weight[:h, wide_features:] = was.hidden.weight[:, features:]  # speed, target speed
+            new.hidden.bias[:h] = was.hidden.bias
+            for out in ("mu", "value"):
+                layer, old_layer = getattr(new, out), getattr(was, out)
+                layer.weight.zero_()  # new hidden units' outputs start at zero
+                layer.weight[:, :h] = old_layer.weight
+                layer.bias.copy_(old_layer.bias)
+    wide.train(policy.training)
+    return wide
 
 
 def preprocess(views: np.ndarray, scalars: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:

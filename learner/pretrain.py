@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from algo.imitation import DemonstrationBuffer, Episode, imitation_loss, newest_frames
-from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy, views_record
+from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy, views_record, widen
 from simcore.controller import SIGHTS
 
 PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
@@ -68,6 +68,9 @@ class PretrainConfig:
     torch_threads: int = 2
     # export an exponential moving average of the weights over Adam steps with this half-life (None: the last weights)
     average_half_life: float | None = None
+    # the network's sizes (conv1 channels, conv2 channels, hidden units); with init_from, the loaded
+    # network is widened to them keeping its function (algo.policy.widen). None: the file's, or the default
+    network: tuple[int, int, int] | None = None
 
 
 def _config_dict(config: PretrainConfig) -> dict:
@@ -108,7 +111,15 @@ class Pretrainer:
         self.config = config
         torch.manual_seed(config.seed)
         torch.set_num_threads(config.torch_threads)
-        self.policy = load_policy(config.init_from) if config.init_from is not None else Policy(PolicyConfig())
+        sizes = None if config.network is None else PolicyConfig(*config.network)
+        if sizes is not None and min(config.network) < 1:
+            raise ValueError(f"network sizes must be >= 1, got {config.network}")
+        if config.init_from is not None:
+            self.policy = load_policy(config.init_from)
+            if sizes is not None and sizes != self.policy.config:
+                self.policy = widen(self.policy, sizes, seed=config.seed)
+        else:
+            self.policy = Policy(sizes or PolicyConfig())
         self.policy.train()
         self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=config.learning_rate)
         # the moving average of the weights (average_half_life), starting at the initial ones
@@ -226,6 +237,10 @@ class Pretrainer:
         return path
 
 
+def _sizes(config: PolicyConfig) -> str:
+    return f"{config.conv1_channels},{config.conv2_channels},{config.hidden} (conv1, conv2, hidden per head)"
+
+
 def _fmt(rate: float | None) -> str:
     return "  -  " if rate is None else f"{100 * rate:5.1f}%"
 
@@ -241,7 +256,7 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     approach += ", waits outside zones" if config.teacher_wait_outside_zones else ""
     approach += ", breaks wait cycles" if config.teacher_break_wait_cycles else ""
     log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}{approach}), "
-        f"buffer {config.buffer_samples} samples "
+        f"network {_sizes(trainer.policy.config)}, buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")
     started = time.monotonic()
     deadline = started + 60.0 * config.minutes

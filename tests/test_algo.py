@@ -321,3 +321,32 @@ def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max
     # the last observation opens the next segment
     assert learner.length == 0
     torch.testing.assert_close(learner.patches[0], patches(torch.from_numpy(raw[n])))
+
+
+@pytest.mark.parametrize("sizes", [(16, 16, 128), (16, 32, 256), (32, 32, 256), (20, 16, 300)])
+def test_a_widened_network_computes_the_same_function_and_its_new_units_learn(sizes):
+    from algo.policy import Policy, PolicyConfig, preprocess, widen
+
+    torch.manual_seed(0)
+    narrow = Policy(PolicyConfig())
+    with torch.no_grad():  # weights away from the initial ones, mu's and biases included
+        for p in narrow.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    wide = widen(narrow, PolicyConfig(*sizes), seed=1)
+    views, speeds = preprocess(np.random.default_rng(2).integers(0, 256, (6, 16, 84, 84), dtype=np.uint8),
+                               np.array([[float(i), 8.0] for i in range(6)]))
+    for a, b in zip(narrow(views, speeds), wide(views, speeds)):
+        assert torch.allclose(a, b, atol=1e-5)
+    loss = sum(out.pow(2).sum() for out in wide(views, speeds))
+    loss.backward()
+    if sizes[2] > 128:  # the new hidden units' outputs get a gradient: they start to learn at once
+        assert wide.acc.mu.weight.grad[:, 128:].abs().sum() > 0
+    if sizes[1] > 16:  # the old hidden units' weights from the new channels too
+        assert wide.acc.hidden.weight.grad[:128, 1600:100 * sizes[1]].abs().sum() > 0
+
+
+def test_widen_refuses_a_smaller_network():
+    from algo.policy import Policy, PolicyConfig, widen
+
+    with pytest.raises(ValueError, match="cannot widen"):
+        widen(Policy(PolicyConfig()), PolicyConfig(hidden=64))

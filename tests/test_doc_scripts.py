@@ -75,3 +75,63 @@ def test_row_seen_in_time_sorts_every_infraction():
     assert (report["scenario"], report["episodes"]) == ("easy", 12)
     assert 0 <= report["seen_in_time_by_centre"] <= report["seen_in_time"] <= report["infractions"]
     assert report["infractions"] > 0  # the view-limited driver commits some in 12 synchronised easy starts
+
+
+def _run_script(name: str, *args: str) -> dict:
+    result = subprocess.run([sys.executable, str(ROOT / "docs/scripts" / name), *args], capture_output=True,
+                            text=True, timeout=600, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    return json.loads(result.stdout.splitlines()[-1])
+
+
+def test_crash_kinds_counts_every_episode_with_the_scripted_driver_and_with_a_policy():
+    scripted = _run_script("crash_kinds.py", "--episodes", "30", "--delay-max", "3", "--brake-for-blockers")
+    policy = _run_script("crash_kinds.py", "--episodes", "6", "--delay-max", "3",
+                         "--checkpoint", "models/easy-student-guard.pt")
+    assert scripted["driver"]["scripted_brake_for_blockers"] is True
+    assert policy["driver"] == {"checkpoint": "models/easy-student-guard.pt"}
+    for report in (scripted, policy):
+        assert sum(report["outcomes"].values()) == report["episodes"] >= 6
+        # one count of standing cars per time-over, each counting at least the car that ran out of time
+        # when it stood; never more cars than the junction holds
+        assert len(report["cars_standing_at_each_time_over"]) == report["outcomes"].get("time_over", 0)
+        assert all(0 <= n <= 16 for n in report["cars_standing_at_each_time_over"])
+        assert sum(report["crash_pairs"].values()) <= report["outcomes"].get("crash", 0)
+
+
+def test_waiting_cars_prints_the_road_for_a_policy_too():
+    result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/waiting_cars.py"), "--scenario", "easy",
+                             "--episodes", "4", "--delay-max", "3", "--checkpoint", "models/easy-student-guard.pt"],
+                            capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout.splitlines()[-1])
+    assert report["driver"] == {"checkpoint": "models/easy-student-guard.pt"}
+    assert sum(report["outcomes"].values()) >= 4
+    snapshot_lines = [line for line in result.stdout.splitlines() if line.startswith("  car ")]
+    assert all(" stood " in line and " m/s, " in line for line in snapshot_lines)
+
+
+def test_a_policy_driver_counts_standing_time_as_the_scripted_driver_does():
+    sys.path.insert(0, str(ROOT / "docs/scripts"))
+    try:
+        from script_driver import ScriptDriver
+    finally:
+        sys.path.pop(0)
+    from simcore.controller import DriverOptions
+    from simcore.simulator import SimConfig, Simulator
+
+    # two simulators in lockstep: both drive with the scripted driver's actions, one also runs the
+    # policy driver for its standing count only
+    sims = [Simulator("easy", SimConfig(delay_min_s=0.0, delay_max_s=3.0), seed=3) for _ in range(2)]
+    results = [sim.reset() for sim in sims]
+    scripted = ScriptDriver(sims[0], DriverOptions(brake_for_blockers=True))
+    policy = ScriptDriver(sims[1], DriverOptions(), checkpoint="models/easy-student-guard.pt")
+    stood = 0
+    for _ in range(300):
+        actions = scripted.act(results[0])
+        policy.act(results[1])
+        results = [sim.step(actions) for sim in sims]
+        for slot in range(sims[0].num_slots):
+            assert abs(scripted.standing_s(slot) - policy.standing_s(slot)) < 1e-9
+            stood += scripted.standing_s(slot) > 0
+    assert stood > 0  # the check compared some standing cars

@@ -208,6 +208,9 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
     (["--teacher-approach-speed", "nan"], "--teacher-approach-speed must be a speed > 0"),
     (["--average-half-life", "0"], "--average-half-life must be > 0"),
     (["--teacher-approach-signs", "own"], "--teacher-approach-signs goes with --teacher-approach-speed"),
+    (["--network", "32,32"], "expected three positive integers"),
+    (["--network", "32,0,256"], "expected three positive integers"),
+    (["--network", "8,16,128", "--init-from", "models/easy-student-guard.pt"], "can only be widened"),
 ])
 def test_pretrain_refuses_bad_input(tmp_path, args, message):
     result = crossway("pretrain", "--out", str(tmp_path / "never"), *args)
@@ -255,3 +258,21 @@ def test_ctrl_c_writes_the_policy_learnt_so_far(tmp_path):
     assert "interrupted, writing the policy" in stdout
     load_policy(out / "pretrained.pt")
     assert (out / "pretrain.json").exists()
+
+
+def test_pretrain_widens_the_initial_network_and_keeps_its_driving(tmp_path):
+    out = tmp_path / "wide"
+    result = crossway("pretrain", "--scenario", "easy", "--rounds", "1", "--steps-per-round", "50",
+                      "--init-from", "models/easy-student-guard.pt", "--network", "16,24,160", "--threads", "1",
+                      "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    assert "network 16,24,160" in result.stdout
+    wide = load_policy(out / "pretrained.pt")
+    assert (wide.config.conv1_channels, wide.config.conv2_channels, wide.config.hidden) == (16, 24, 160)
+    # a few Adam steps from the widened start: the policy still drives as the one it grew from
+    narrow = load_policy("models/easy-student-guard.pt")
+    views = torch.randint(0, 256, (8, 16, 84, 84), dtype=torch.uint8).float() / 255
+    speeds = torch.rand(8, 2)
+    with torch.no_grad():
+        drift = max(float((a - b).abs().max()) for a, b in zip(wide(views, speeds), narrow(views, speeds)))
+    assert drift < 0.2

@@ -73,6 +73,11 @@ def add_parser(subparsers) -> None:
                              "each step's weights counting 0.5**(steps since / UPDATES) (Polyak averaging: it "
                              "smooths the noise of the last steps); the last weights go to OUT/pretrained-last.pt. "
                              "Default: the last weights")
+    parser.add_argument("--network", type=_network_sizes, default=None, metavar="C1,C2,HIDDEN",
+                        help="the network's sizes per head: first and second convolution channels, hidden units "
+                             "(the default network is 16,16,128). With --init-from the loaded network is widened "
+                             "to these sizes computing the same function: its units keep their weights, new ones "
+                             "start with zero outputs (docs/training.md). Default: the --init-from file's sizes")
     parser.add_argument("--buffer-samples", type=int, default=40_000,
                         help="replay capacity in samples (28 KB each: 40,000 take 1.1 GB)")
     parser.add_argument("--delay-max", type=float, default=None, metavar="SECONDS",
@@ -80,6 +85,17 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed")
     parser.add_argument("--threads", type=int, default=2, help="torch threads for training")
     parser.set_defaults(func=run)
+
+
+def _network_sizes(text: str) -> tuple[int, int, int]:
+    try:
+        sizes = tuple(int(part) for part in text.split(","))
+    except ValueError:
+        sizes = ()
+    if len(sizes) != 3 or min(sizes) < 1:
+        raise argparse.ArgumentTypeError(f"expected three positive integers C1,C2,HIDDEN such as 32,32,256, "
+                                         f"got {text!r}")
+    return sizes
 
 
 def run(args) -> int:
@@ -117,7 +133,13 @@ def run(args) -> int:
     if args.init_from is not None:
         from algo.policy import load_policy
 
-        load_policy(args.init_from)  # refuse a bad file before the simulator starts
+        loaded = load_policy(args.init_from)  # refuse a bad file before the simulator starts
+        if args.network is not None:
+            had = (loaded.config.conv1_channels, loaded.config.conv2_channels, loaded.config.hidden)
+            if any(new < old for new, old in zip(args.network, had)):
+                raise ValueError(f"--network {','.join(map(str, args.network))} is smaller than the network of "
+                                 f"{args.init_from} ({','.join(map(str, had))}) in a layer: a network can only be "
+                                 "widened")
     config = PretrainConfig(
         scenario=args.scenario, minutes=args.minutes, rounds=args.rounds, steps_per_round=args.steps_per_round,
         reuse=args.reuse, batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef,
@@ -128,7 +150,7 @@ def run(args) -> int:
         teacher_half_life=args.teacher_half_life,
         brake_weight=args.brake_weight,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
-        torch_threads=args.threads, average_half_life=args.average_half_life)
+        torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network)
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True))
     return 0

@@ -1,10 +1,10 @@
 """What the view-limited scripted driver's crashes look like (docs/training.md, session 14).
 
     python docs/scripts/crash_kinds.py [--scenario easy] [--delay-max 10] [--episodes 600] [--seed 11]
-        [--approach-speed 1] [--approach-signs own] [--brake-for-blockers]
+        [--approach-speed 1] [--approach-signs own] [--brake-for-blockers] [--checkpoint CKPT]
 
-Drives the scenario's Table I set-up (delay_min 0) with the scripted driver limited to the views
-and, for every pair of cars that crash into each other, records the kind of the pair (same entry
+Drives the scenario's Table I set-up (delay_min 0) with the scripted driver limited to the views,
+or with the trained policy ``--checkpoint`` (Gaussian means, as ``crossway evaluate``), and, for every pair of cars that crash into each other, records the kind of the pair (same entry
 lane, merging, crossing), which one had priority, both speeds at the impact, and whether the car
 without priority had entered their conflict zone (its front past the zone's start) while the car
 with priority was still outside it: then the car with priority ran into a car already in its way.
@@ -22,7 +22,8 @@ import math
 
 import numpy as np
 
-from simcore.controller import DriverOptions, scripted_driver
+from script_driver import ScriptDriver, add_checkpoint_argument, needs_views
+from simcore.controller import DriverOptions
 from simcore.dynamics import DT, VEHICLE_LENGTH
 from simcore.rewards import EndReason
 from simcore.simulator import SimConfig, Simulator
@@ -40,14 +41,15 @@ def main() -> None:
     parser.add_argument("--approach-speed", type=float, default=1.0, help="[m/s]; 0 or less: no approach rule")
     parser.add_argument("--approach-signs", choices=("all", "own"), default="own")
     parser.add_argument("--brake-for-blockers", action="store_true")
+    add_checkpoint_argument(parser)
     args = parser.parse_args()
 
-    sim = Simulator(args.scenario, SimConfig(delay_min_s=0.0, delay_max_s=args.delay_max, observe=False),
+    sim = Simulator(args.scenario, SimConfig(delay_min_s=0.0, delay_max_s=args.delay_max, observe=needs_views(args)),
                     seed=args.seed)
-    sim.reset()
+    result = sim.reset()
     options = DriverOptions(sight="view", approach_speed_mps=args.approach_speed if args.approach_speed > 0 else None,
                             approach_signs=args.approach_signs, brake_for_blockers=args.brake_for_blockers)
-    driver = scripted_driver(sim, options)
+    driver = ScriptDriver(sim, options, args.checkpoint)
     entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])
     outcomes: collections.Counter = collections.Counter()
     kinds: collections.Counter = collections.Counter()
@@ -61,7 +63,7 @@ def main() -> None:
     while done < args.episodes:
         routes, s, signs = sim.route.copy(), sim.s.copy(), sim.sign.copy()  # before the step
         history.append(s)
-        result = sim.step(driver.act())
+        result = sim.step(driver.act(result))
         for episode in result.episodes:
             if episode.end_reason in OUTCOMES:
                 outcomes[episode.end_reason] += 1
@@ -100,7 +102,7 @@ def main() -> None:
                                 lower_first.append(back * DT)
                             break
     print(json.dumps({"scenario": args.scenario, "delay_max_s": args.delay_max, "episodes": done,
-                      "seed": args.seed, "driver": options.record(), "outcomes": dict(outcomes),
+                      "seed": args.seed, "driver": driver.record(), "outcomes": dict(outcomes),
                       "crash_pairs": dict(kinds), "crossing_pairs_with_a_priority": crossing_with_priority,
                       "lower_car_entered_the_zone_first": len(lower_first),
                       "seconds_from_that_entry_to_impact": sorted(round(x, 1) for x in lower_first),
