@@ -28,7 +28,7 @@ import torch
 
 from algo.imitation import DemonstrationBuffer, Episode, imitation_loss, newest_frames
 from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy, views_record, widen
-from simcore.controller import SIGHTS
+from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S, SIGHTS
 
 PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
                     "action_loss_sa", "value_loss_acc", "value_loss_sa", "student_episodes",
@@ -59,6 +59,9 @@ class PretrainConfig:
     teacher_wait_outside_zones: bool = False
     # the teacher goes ahead of a car with priority that waits, through a chain of cars, for it
     teacher_break_wait_cycles: bool = False
+    # the teacher stops yielding to cars with priority / braking for blockers after standing this long [s]; inf: never
+    teacher_patience_s: float = PATIENCE_S
+    teacher_blocker_patience_s: float = BLOCKER_PATIENCE_S
     teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
     brake_weight: float = 1.0  # weight of the teacher's hard-braking labels in the action loss (imitation_loss)
     buffer_samples: int = 40_000  # replay capacity, 28 KB per sample
@@ -101,7 +104,8 @@ class Pretrainer:
         teacher_options = DriverOptions(  # refuses an unknown approach_signs before anything is built
             sight=config.teacher_sight, approach_speed_mps=config.teacher_approach_mps,
             approach_signs=config.teacher_approach_signs, brake_for_blockers=config.teacher_brake_for_blockers,
-            wait_outside_zones=config.teacher_wait_outside_zones, break_wait_cycles=config.teacher_break_wait_cycles)
+            wait_outside_zones=config.teacher_wait_outside_zones, break_wait_cycles=config.teacher_break_wait_cycles,
+            patience_s=config.teacher_patience_s, blocker_patience_s=config.teacher_blocker_patience_s)
         if not config.teacher_half_life > 0:
             raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
         if not config.brake_weight > 0:
@@ -255,6 +259,9 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     approach += ", brakes for blockers" if config.teacher_brake_for_blockers else ""
     approach += ", waits outside zones" if config.teacher_wait_outside_zones else ""
     approach += ", breaks wait cycles" if config.teacher_break_wait_cycles else ""
+    approach += f", patience {config.teacher_patience_s:g} s"
+    if config.teacher_brake_for_blockers:
+        approach += f" (for blockers {config.teacher_blocker_patience_s:g} s)"
     log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}{approach}), "
         f"network {_sizes(trainer.policy.config)}, buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")

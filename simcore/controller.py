@@ -108,6 +108,10 @@ class DriverOptions:
     brake_for_blockers: bool = False  # stop before a zone a car in sight occupies, whatever the priority
     wait_outside_zones: bool = False  # never plan a stop that leaves the car inside another conflict zone
     break_wait_cycles: bool = False  # go ahead of a car with priority that waits, through others, for this one
+    # after standing this long it stops yielding to cars with priority [s]; inf: never (no clock the views show)
+    patience_s: float = PATIENCE_S
+    # after standing this long it stops braking for cars in its way (brake_for_blockers) [s]; inf: never
+    blocker_patience_s: float = BLOCKER_PATIENCE_S
 
     def __post_init__(self):
         if self.sight not in SIGHTS:
@@ -116,6 +120,7 @@ class DriverOptions:
             raise ValueError(f"approach_speed_mps must be >= 0 m/s or None, got {self.approach_speed_mps}")
         if self.approach_signs not in APPROACH_SIGNS:
             raise ValueError(f"approach_signs must be one of {APPROACH_SIGNS}, got {self.approach_signs!r}")
+        _check_patience(self.patience_s, self.blocker_patience_s)
 
     def record(self) -> dict:
         """The options as an evaluation's JSON records them (approach_signs only with a speed)."""
@@ -124,7 +129,20 @@ class DriverOptions:
                 "scripted_approach_signs": self.approach_signs if self.approach_speed_mps is not None else None,
                 "scripted_brake_for_blockers": self.brake_for_blockers,
                 "scripted_wait_outside_zones": self.wait_outside_zones,
-                "scripted_break_wait_cycles": self.break_wait_cycles}
+                "scripted_break_wait_cycles": self.break_wait_cycles,
+                "scripted_patience_s": _seconds_or_never(self.patience_s),
+                "scripted_blocker_patience_s": _seconds_or_never(self.blocker_patience_s)}
+
+
+def _check_patience(patience_s: float, blocker_patience_s: float) -> None:
+    for name, value in (("patience_s", patience_s), ("blocker_patience_s", blocker_patience_s)):
+        if not value > 0:  # nan fails too; inf is allowed
+            raise ValueError(f"{name} must be > 0 s (inf: never), got {value}")
+
+
+def _seconds_or_never(value: float) -> float | str:
+    """A patience for JSON, which has no infinity."""
+    return "never" if math.isinf(value) else value
 
 
 def scripted_driver(sim: Simulator, options: DriverOptions | None = None) -> "ScriptedDriver":
@@ -133,7 +151,8 @@ def scripted_driver(sim: Simulator, options: DriverOptions | None = None) -> "Sc
     options = options or DriverOptions()
     return ScriptedDriver(sim, approach_speed_mps=options.approach_speed_mps, approach_signs=options.approach_signs,
                           brake_for_blockers=options.brake_for_blockers, wait_outside_zones=options.wait_outside_zones,
-                          break_wait_cycles=options.break_wait_cycles,
+                          break_wait_cycles=options.break_wait_cycles, patience_s=options.patience_s,
+                          blocker_patience_s=options.blocker_patience_s,
                           **(view_sight(sim) if options.sight == "view" else {}))
 
 
@@ -143,7 +162,8 @@ class ScriptedDriver:
     def __init__(self, sim: Simulator, speed_fraction: float = 0.9, yield_to_priority: bool = True,
                  sight_m: float | None = None, approach_speed_mps: float | None = None,
                  sight_shift_m: float = 0.0, approach_signs: str = "all", brake_for_blockers: bool = False,
-                 wait_outside_zones: bool = False, break_wait_cycles: bool = False):
+                 wait_outside_zones: bool = False, break_wait_cycles: bool = False,
+                 patience_s: float = PATIENCE_S, blocker_patience_s: float = BLOCKER_PATIENCE_S):
         if sight_m is not None and not sight_m > 0:
             raise ValueError(f"sight_m must be > 0 m or None, got {sight_m}")
         if not math.isfinite(sight_shift_m):
@@ -152,6 +172,9 @@ class ScriptedDriver:
             raise ValueError(f"approach_speed_mps must be >= 0 m/s or None, got {approach_speed_mps}")
         if approach_signs not in APPROACH_SIGNS:
             raise ValueError(f"approach_signs must be one of {APPROACH_SIGNS}, got {approach_signs!r}")
+        _check_patience(patience_s, blocker_patience_s)
+        self.patience_s = patience_s  # after standing this long, stop yielding to cars with priority [s]
+        self.blocker_patience_s = blocker_patience_s  # after standing this long, stop braking for blockers [s]
         self.approach_signs = approach_signs
         self.brake_for_blockers = brake_for_blockers
         self.wait_outside_zones = wait_outside_zones
@@ -213,7 +236,7 @@ class ScriptedDriver:
                     room = max(float(upcoming.min()) - STOP_MARGIN_M - s_front, 0.0)
                     desired = min(desired, math.sqrt(self.approach_speed_mps ** 2 + 2.0 * APPROACH_DECELERATION * room))
             acceleration = SPEED_GAIN * (desired - speed)
-            patient = self._standing_s[slot] < PATIENCE_S
+            patient = self._standing_s[slot] < self.patience_s
             for b, other in enumerate(idx.tolist()):
                 if not (higher[a, b] and patient):
                     continue
@@ -243,7 +266,7 @@ class ScriptedDriver:
                         acceleration = min(acceleration, braking)
                 elif self.break_wait_cycles:
                     waits_for[slot].add(other)  # not braking yet, but it will
-            if self.brake_for_blockers and self._standing_s[slot] < BLOCKER_PATIENCE_S:
+            if self.brake_for_blockers and self._standing_s[slot] < self.blocker_patience_s:
                 braking, occupants = self._blocker_braking(slot, idx, sight[a], speed, s_front)
                 acceleration = min(acceleration, braking)
                 waits_for[slot].update(occupants)

@@ -59,7 +59,8 @@ def test_table1_scripted_end_to_end(tmp_path):
 def test_table1_scripted_with_the_views_sight(tmp_path):
     result = crossway("evaluate", "table1", "--scripted", "--scripted-sight", "view", "--scripted-approach-speed",
                       "3", "--scripted-approach-signs", "own", "--scripted-brake-for-blockers",
-                      "--scripted-wait-outside-zones", "--scripted-break-wait-cycles", "--scenario", "easy",
+                      "--scripted-wait-outside-zones", "--scripted-break-wait-cycles", "--scripted-patience", "inf",
+                      "--scripted-blocker-patience", "6", "--scenario", "easy",
                       "--episodes", "3", "--workers", "1", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
     report = json.loads((tmp_path / "table1-easy.json").read_text())
@@ -68,17 +69,21 @@ def test_table1_scripted_with_the_views_sight(tmp_path):
     assert report["meta"]["scripted_approach_signs"] == "own"
     assert report["meta"]["scripted_brake_for_blockers"] is True
     assert report["meta"]["scripted_wait_outside_zones"] is True and report["meta"]["scripted_break_wait_cycles"]
+    assert report["meta"]["scripted_patience_s"] == "never" and report["meta"]["scripted_blocker_patience_s"] == 6.0
     alone = crossway("evaluate", "table1", "--scripted", "--scripted-approach-signs", "own", "--out",
                      str(tmp_path / "never"))
     assert alone.returncode == 2 and "--scripted-approach-signs goes with --scripted-approach-speed" in alone.stderr
     for option in (["--scripted-sight", "view"], ["--scripted-approach-speed", "3"], ["--scripted-brake-for-blockers"],
-                   ["--scripted-wait-outside-zones"], ["--scripted-break-wait-cycles"]):
+                   ["--scripted-wait-outside-zones"], ["--scripted-break-wait-cycles"], ["--scripted-patience", "inf"],
+                   ["--scripted-blocker-patience", "3"]):
         refused = crossway("evaluate", "table1", "--checkpoint", str(tmp_path / "x.pt"), *option,
                            "--out", str(tmp_path / "never"))
         assert refused.returncode == 2 and "go with --scripted, not with --checkpoint" in refused.stderr
     negative = crossway("evaluate", "table1", "--scripted", "--scripted-approach-speed", "-1", "--out",
                         str(tmp_path / "never"))
     assert negative.returncode == 2 and "must be >= 0 m/s" in negative.stderr
+    impatient = crossway("evaluate", "table1", "--scripted", "--scripted-patience", "0", "--out", str(tmp_path / "never"))
+    assert impatient.returncode == 2 and "--scripted-patience must be > 0 s" in impatient.stderr
     assert not (tmp_path / "never").exists()
 
 

@@ -208,6 +208,8 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
     (["--teacher-approach-speed", "nan"], "--teacher-approach-speed must be a speed > 0"),
     (["--average-half-life", "0"], "--average-half-life must be > 0"),
     (["--teacher-approach-signs", "own"], "--teacher-approach-signs goes with --teacher-approach-speed"),
+    (["--teacher-patience", "0"], "--teacher-patience must be > 0 s"),
+    (["--teacher-blocker-patience", "nan"], "--teacher-blocker-patience must be > 0 s"),
     (["--network", "32,32"], "expected three positive integers"),
     (["--network", "32,0,256"], "expected three positive integers"),
     (["--network", "8,16,128", "--init-from", "models/easy-student-guard.pt"], "can only be widened"),

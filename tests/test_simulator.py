@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import empty_simulator, place, route_index, still
-from simcore.controller import (APPROACH_DECELERATION, BLOCKER_PATIENCE_S, SPEED_GAIN, STOP_MARGIN_M, DriverOptions,
+from simcore.controller import (APPROACH_DECELERATION, BLOCKER_PATIENCE_S, PATIENCE_S, SPEED_GAIN, STOP_MARGIN_M, DriverOptions,
                                 ScriptedDriver, scripted_driver)
 from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
 from simcore.rewards import EndReason
@@ -347,6 +347,29 @@ def test_a_teacher_that_brakes_for_blockers_stops_for_a_car_standing_in_its_zone
     assert waiting.act()[east, 0] == -3.0
     waiting._standing_s[east] = BLOCKER_PATIENCE_S
     assert waiting.act()[east, 0] > 0.0
+    # a driver without that patience waits for as long as the zone is occupied
+    never = ScriptedDriver(sim, brake_for_blockers=True, blocker_patience_s=math.inf)
+    never._standing_s[east] = 1000.0
+    assert never.act()[east, 0] == -3.0
+
+
+def test_a_driver_goes_ahead_of_a_car_with_priority_after_its_patience_and_never_without_one(medium_road):
+    """The south car (stop sign) stands at its stop point; the east car (no sign, priority) comes
+    at 8 m/s, 2 s from their zone. The scripted driver waits PATIENCE_S, then goes; with patience_s
+    inf it waits whatever its standing time."""
+    sim = medium_road
+    south_route, east_route = route_index(sim, "south_0", "straight"), route_index(sim, "east_0", "straight")
+    table = sim.priority
+    stop_s = table.zone_start[south_route, east_route] - STOP_MARGIN_M - 0.5 * VEHICLE_LENGTH
+    south = place(sim, "south_0", "straight", s=stop_s, sign=2, speed=0.0)
+    east = place(sim, "east_0", "straight", s=table.zone_start[east_route, south_route] - 16.0, sign=0, speed=8.0)
+    assert sim.priorities(np.array([south, east]))[0, 1]  # east over south
+    for patience_s, stood_s, goes in ((PATIENCE_S, PATIENCE_S - 0.5, False), (PATIENCE_S, PATIENCE_S, True),
+                                      (math.inf, 1000.0, False)):
+        driver = ScriptedDriver(sim, patience_s=patience_s)
+        driver._standing_s[south] = stood_s
+        assert (driver.act()[south, 0] > 0.0) == goes, (patience_s, stood_s)
+    assert scripted_driver(sim, DriverOptions(patience_s=math.inf)).patience_s == math.inf
 
 
 def test_a_driver_that_waits_outside_zones_stops_before_the_first_of_overlapping_zones():
@@ -431,9 +454,17 @@ def test_driver_options_refuse_unknown_values_and_record_what_the_json_holds():
         DriverOptions(approach_speed_mps=-1.0)
     with pytest.raises(ValueError, match="approach_signs"):
         DriverOptions(approach_speed_mps=1.0, approach_signs="some")
+    for bad in (0.0, -1.0, math.nan):
+        with pytest.raises(ValueError, match="patience_s"):
+            DriverOptions(patience_s=bad)
+        with pytest.raises(ValueError, match="blocker_patience_s"):
+            DriverOptions(blocker_patience_s=bad)
     assert DriverOptions().record() == {"scripted_sight": None, "scripted_approach_mps": None,
                                         "scripted_approach_signs": None, "scripted_brake_for_blockers": False,
-                                        "scripted_wait_outside_zones": False, "scripted_break_wait_cycles": False}
-    assert DriverOptions("view", 2.0, "own", True, True, True).record() == {
+                                        "scripted_wait_outside_zones": False, "scripted_break_wait_cycles": False,
+                                        "scripted_patience_s": PATIENCE_S,
+                                        "scripted_blocker_patience_s": BLOCKER_PATIENCE_S}
+    assert DriverOptions("view", 2.0, "own", True, True, True, math.inf, 5.0).record() == {
         "scripted_sight": "view", "scripted_approach_mps": 2.0, "scripted_approach_signs": "own",
-        "scripted_brake_for_blockers": True, "scripted_wait_outside_zones": True, "scripted_break_wait_cycles": True}
+        "scripted_brake_for_blockers": True, "scripted_wait_outside_zones": True, "scripted_break_wait_cycles": True,
+        "scripted_patience_s": "never", "scripted_blocker_patience_s": 5.0}

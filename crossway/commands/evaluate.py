@@ -119,6 +119,12 @@ def _add_scripted_options(parser) -> None:
     parser.add_argument("--scripted-break-wait-cycles", action="store_true",
                         help="with --scripted: go ahead of a car with priority that waits, through a chain of "
                              "cars, for this one (else the chain waits for ever)")
+    parser.add_argument("--scripted-patience", type=float, default=None, metavar="SECONDS",
+                        help="with --scripted: after standing this long, stop yielding to cars with priority and go "
+                             "('inf': never; default 4)")
+    parser.add_argument("--scripted-blocker-patience", type=float, default=None, metavar="SECONDS",
+                        help="with --scripted-brake-for-blockers: after standing this long, stop braking for cars "
+                             "in the way ('inf': never; default 8)")
 
 
 def _scripted_options(args, checkpoint: str | None) -> dict:
@@ -127,10 +133,20 @@ def _scripted_options(args, checkpoint: str | None) -> dict:
 
     if checkpoint is not None and (args.scripted_sight is not None or args.scripted_approach_speed is not None
                                    or args.scripted_approach_signs is not None or args.scripted_brake_for_blockers
-                                   or args.scripted_wait_outside_zones or args.scripted_break_wait_cycles):
+                                   or args.scripted_wait_outside_zones or args.scripted_break_wait_cycles
+                                   or args.scripted_patience is not None
+                                   or args.scripted_blocker_patience is not None):
         raise ValueError("--scripted-sight, --scripted-approach-speed, --scripted-approach-signs, "
-                         "--scripted-brake-for-blockers, --scripted-wait-outside-zones and "
-                         "--scripted-break-wait-cycles go with --scripted, not with --checkpoint")
+                         "--scripted-brake-for-blockers, --scripted-wait-outside-zones, "
+                         "--scripted-break-wait-cycles, --scripted-patience and --scripted-blocker-patience go "
+                         "with --scripted, not with --checkpoint")
+    patience = {}
+    for flag, key, value in (("--scripted-patience", "patience_s", args.scripted_patience),
+                             ("--scripted-blocker-patience", "blocker_patience_s", args.scripted_blocker_patience)):
+        if value is not None:
+            if not value > 0:
+                raise ValueError(f"{flag} must be > 0 s ('inf': never), got {value}")
+            patience[key] = value
     if args.scripted_approach_signs is not None and args.scripted_approach_speed is None:
         raise ValueError("--scripted-approach-signs goes with --scripted-approach-speed")
     if args.scripted_approach_speed is not None and not args.scripted_approach_speed >= 0:
@@ -140,7 +156,7 @@ def _scripted_options(args, checkpoint: str | None) -> dict:
                                       approach_signs=args.scripted_approach_signs or "all",
                                       brake_for_blockers=args.scripted_brake_for_blockers,
                                       wait_outside_zones=args.scripted_wait_outside_zones,
-                                      break_wait_cycles=args.scripted_break_wait_cycles)}
+                                      break_wait_cycles=args.scripted_break_wait_cycles, **patience)}
 
 
 def _add_run_options(parser, episodes: int, episodes_help: str) -> None:

@@ -62,6 +62,13 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--teacher-break-wait-cycles", action="store_true",
                         help="the teacher goes ahead of a car with priority that waits, through a chain of cars, "
                              "for it: with --teacher-brake-for-blockers the cars on hard otherwise lock each other")
+    parser.add_argument("--teacher-patience", type=float, default=4.0, metavar="SECONDS",
+                        help="after standing this long the teacher stops yielding to cars with priority and goes; "
+                             "'inf': it never does. A clock the student's four frames (0.3 s) cannot show: on "
+                             "medium and hard 'inf' also drives better (docs/training.md)")
+    parser.add_argument("--teacher-blocker-patience", type=float, default=8.0, metavar="SECONDS",
+                        help="with --teacher-brake-for-blockers: after standing this long the teacher stops "
+                             "braking for cars in its way; 'inf': it never does")
     parser.add_argument("--teacher-half-life", type=float, default=20_000.0, metavar="SAMPLES",
                         help="a new episode is driven by the teacher with probability 0.5**(samples collected / "
                              "SAMPLES), by the network otherwise (DAgger); 'inf': always the teacher")
@@ -119,6 +126,10 @@ def run(args) -> int:
         raise ValueError(f"--brake-weight must be > 0, got {args.brake_weight}")
     if args.teacher_approach_speed is not None and not 0.0 < args.teacher_approach_speed < float("inf"):
         raise ValueError(f"--teacher-approach-speed must be a speed > 0 m/s, got {args.teacher_approach_speed}")
+    for flag, value in (("--teacher-patience", args.teacher_patience),
+                        ("--teacher-blocker-patience", args.teacher_blocker_patience)):
+        if not value > 0:
+            raise ValueError(f"{flag} must be > 0 s ('inf': never), got {value}")
     if args.teacher_approach_signs != "all" and args.teacher_approach_speed is None:
         raise ValueError("--teacher-approach-signs goes with --teacher-approach-speed")
     if args.average_half_life is not None and not 0.0 < args.average_half_life < float("inf"):
@@ -147,6 +158,7 @@ def run(args) -> int:
         teacher_approach_signs=args.teacher_approach_signs, teacher_brake_for_blockers=args.teacher_brake_for_blockers,
         teacher_wait_outside_zones=args.teacher_wait_outside_zones,
         teacher_break_wait_cycles=args.teacher_break_wait_cycles,
+        teacher_patience_s=args.teacher_patience, teacher_blocker_patience_s=args.teacher_blocker_patience,
         teacher_half_life=args.teacher_half_life,
         brake_weight=args.brake_weight,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
