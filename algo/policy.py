@@ -92,7 +92,8 @@ def widen(policy: Policy, config: PolicyConfig, seed: int = 0) -> Policy:
     old = policy.config
     sizes = ("conv1_channels", "conv2_channels", "hidden")
     if any(getattr(config, name) < getattr(old, name) for name in sizes):
-        raise ValueError(f"cannot widen the network {asdict(old)} to the smaller {asdict(config)}")
+        raise ValueError(f"cannot widen the network {asdict(old)} to {asdict(config)}: a layer would shrink (a "
+                         "network can only be widened)")
     with torch.random.fork_rng(devices=[]):  # the caller's random stream stays as it was
         torch.manual_seed(seed)
         wide = Policy(config)

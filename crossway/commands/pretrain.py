@@ -146,11 +146,13 @@ def run(args) -> int:
 
         loaded = load_policy(args.init_from)  # refuse a bad file before the simulator starts
         if args.network is not None:
-            had = (loaded.config.conv1_channels, loaded.config.conv2_channels, loaded.config.hidden)
-            if any(new < old for new, old in zip(args.network, had)):
-                raise ValueError(f"--network {','.join(map(str, args.network))} is smaller than the network of "
-                                 f"{args.init_from} ({','.join(map(str, had))}) in a layer: a network can only be "
-                                 "widened")
+            from algo.policy import PolicyConfig, widen
+
+            try:
+                widen(loaded, PolicyConfig(*args.network))  # refuses a smaller network
+            except ValueError as error:
+                raise ValueError(f"--network {','.join(map(str, args.network))} and --init-from "
+                                 f"{args.init_from}: {error}") from None
     config = PretrainConfig(
         scenario=args.scenario, minutes=args.minutes, rounds=args.rounds, steps_per_round=args.steps_per_round,
         reuse=args.reuse, batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef,

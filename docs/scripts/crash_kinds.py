@@ -4,8 +4,9 @@
         [--approach-speed 1] [--approach-signs own] [--brake-for-blockers] [--checkpoint CKPT]
 
 Drives the scenario's Table I set-up (delay_min 0) with the scripted driver limited to the views,
-or with the trained policy ``--checkpoint`` (Gaussian means, as ``crossway evaluate``), and, for every pair of cars that crash into each other, records the kind of the pair (same entry
-lane, merging, crossing), which one had priority, both speeds at the impact, and whether the car
+or with the trained policy ``--checkpoint`` (Gaussian means, as ``crossway evaluate``), and, for
+every pair of cars that crash into each other, records the kind of the pair (same entry lane,
+merging, crossing), which one had priority, both speeds at the impact, and whether the car
 without priority had entered their conflict zone (its front past the zone's start) while the car
 with priority was still outside it: then the car with priority ran into a car already in its way.
 At each time-over it counts the cars standing (under 0.5 m/s) on the road at that step, those
