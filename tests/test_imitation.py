@@ -249,7 +249,10 @@ def test_ctrl_c_writes_the_policy_learnt_so_far(tmp_path):
     out = tmp_path / "pre"
     process = subprocess.Popen([sys.executable, "-m", "crossway", "pretrain", "--scenario", "easy", "--minutes", "5",
                                 "--steps-per-round", "150", "--threads", "1", "--out", str(out)],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               # a suite started in the background by a shell inherits SIGINT ignored, and
+                               # Python then keeps it ignored: give the child the default disposition
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     progress = out / "progress.csv"
     deadline = time.monotonic() + 240
     while time.monotonic() < deadline and (not progress.exists() or len(progress.read_text().splitlines()) < 3):
