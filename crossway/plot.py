@@ -39,7 +39,8 @@ def _nice_ticks(low: float, high: float, count: int = 5) -> list[float]:
             step *= factor
             break
     first = math.ceil(low / step) * step
-    return [first + i * step for i in range(int((high - first) / step) + 1)]
+    # the small slack keeps a tick at ``high`` itself that rounding would drop ((1 - 0.85) / 0.05 < 3)
+    return [first + i * step for i in range(int((high - first) / step + 1e-9) + 1)]
 
 
 def _label(value: float) -> str:

@@ -7,7 +7,7 @@ import cairo
 import numpy as np
 import pytest
 
-from crossway.plot import COLOURS, plot_curves, read_progress
+from crossway.plot import COLOURS, _nice_ticks, plot_curves, read_progress
 
 
 def pixels(path) -> np.ndarray:
@@ -64,3 +64,30 @@ def test_styles_share_a_colour_and_dash_a_series(tmp_path):
     assert hits[solid_row].sum() > 1.4 * hits[dashed_row].sum()  # the dashed line has gaps
     with pytest.raises(ValueError, match="2 styles for 1 series"):
         plot_curves(series[:1], tmp_path / "bad.png", "t", "x", "y", styles=[(0, False), (1, True)])
+
+
+def test_y_range_zooms_the_axis_and_bad_limits_are_refused(tmp_path):
+    path = tmp_path / "progress.csv"
+    path.write_text("samples,student_reach_rate\n0,0.95\n100,0.95\n")
+    out = tmp_path / "zoom.png"
+    command = [sys.executable, "-m", "crossway", "plot", f"run={path}", "--x", "samples", "--y", "student_reach_rate"]
+    result = subprocess.run(command + ["--y-range", "0.9,1", "--out", str(out)], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 0, result.stderr
+    height, top, bottom = 480, 50, 60 + 18  # frame rows top .. height - bottom, one legend row
+    rows = colour_rows(pixels(out), COLOURS[0])
+    curve = rows[rows < height - bottom]
+    middle = (top + height - bottom) / 2
+    # 0.95 is half-way up a 0.9-1 axis (on the default 0-1 axis it would sit near the top)
+    assert abs(curve.mean() - middle) <= 3
+    for bad, message in (("1,0.9", "LOW must be under HIGH"), ("0.9", "expected LOW,HIGH")):
+        result = subprocess.run(command + ["--y-range", bad, "--out", str(tmp_path / "bad.png")],
+                                capture_output=True, text=True, timeout=60)
+        assert result.returncode == 2 and message in result.stderr
+        assert not (tmp_path / "bad.png").exists()
+
+
+def test_ticks_reach_both_ends_of_the_axis():
+    assert _nice_ticks(0.85, 1.0) == pytest.approx([0.85, 0.9, 0.95, 1.0])
+    assert _nice_ticks(0.0, 1.0) == pytest.approx([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
+    assert _nice_ticks(0.0, 1e6) == pytest.approx([0.0, 2e5, 4e5, 6e5, 8e5, 1e6])

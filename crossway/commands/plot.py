@@ -18,7 +18,20 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--x", default="agent_steps", help="column on the x axis")
     parser.add_argument("--y", default="reach_rate", help="column on the y axis")
     parser.add_argument("--title", default="Reach rate (rolling, last 200 episodes)", help="plot title")
+    parser.add_argument("--y-range", type=y_range_arg, metavar="LOW,HIGH", default=argparse.SUPPRESS,
+                        help="y axis limits, e.g. 0.9,1 to tell rates near 1 apart (default: 0,1 for a column "
+                             "whose name ends in 'rate', the data's range otherwise)")
     parser.set_defaults(func=run)
+
+
+def y_range_arg(text: str) -> tuple[float, float]:
+    try:
+        low, high = (float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH (two numbers), got {text!r}") from None
+    if not low < high:
+        raise argparse.ArgumentTypeError(f"LOW must be under HIGH, got {text!r}")
+    return low, high
 
 
 def run(args) -> int:
@@ -36,7 +49,7 @@ def run(args) -> int:
             raise ValueError(f"no such file: {path}")
         xs, ys = read_progress(Path(path), args.x, args.y)
         series.append((name, xs, ys))
-    y_range = (0.0, 1.0) if args.y.endswith("rate") else None
+    y_range = getattr(args, "y_range", None) or ((0.0, 1.0) if args.y.endswith("rate") else None)
     plot_curves(series, args.out, args.title, args.x.replace("_", " "), args.y.replace("_", " "), y_range)
     print(f"wrote {args.out}")
     return 0
