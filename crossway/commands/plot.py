@@ -9,8 +9,9 @@ from pathlib import Path
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "plot", help="draw learning curves from progress.csv files (PNG)",
-        description="Draw one curve per progress.csv (written by 'crossway train' into its run directory), "
-                    "e.g. the rolling reach rate against agent-steps.",
+        description="Draw one curve per progress.csv (written by 'crossway train' into its run directory, or by "
+                    "'crossway pretrain' into its --out), e.g. the rolling reach rate against agent-steps, or "
+                    "--x samples --y student_reach_rate for a pretrain run.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("progress", nargs="+", type=Path, help="progress.csv files; NAME=PATH sets a legend name")
