@@ -80,7 +80,8 @@ def test_y_range_zooms_the_axis_and_bad_limits_are_refused(tmp_path):
     middle = (top + height - bottom) / 2
     # 0.95 is half-way up a 0.9-1 axis (on the default 0-1 axis it would sit near the top)
     assert abs(curve.mean() - middle) <= 3
-    for bad, message in (("1,0.9", "LOW must be under HIGH"), ("0.9", "expected LOW,HIGH")):
+    for bad, message in (("1,0.9", "LOW must be under HIGH"), ("0.9", "expected LOW,HIGH"),
+                         ("0,inf", "must be finite")):
         result = subprocess.run(command + ["--y-range", bad, "--out", str(tmp_path / "bad.png")],
                                 capture_output=True, text=True, timeout=60)
         assert result.returncode == 2 and message in result.stderr

@@ -1,8 +1,10 @@
-"""``crossway plot``: learning curves from ``crossway train``'s progress.csv files, as PNG."""
+"""``crossway plot``: learning curves from the progress.csv files of ``crossway train`` and
+``crossway pretrain``, as PNG."""
 
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 
@@ -30,6 +32,8 @@ def y_range_arg(text: str) -> tuple[float, float]:
         low, high = (float(part) for part in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected LOW,HIGH (two numbers), got {text!r}") from None
+    if not (math.isfinite(low) and math.isfinite(high)):
+        raise argparse.ArgumentTypeError(f"LOW and HIGH must be finite, got {text!r}")
     if not low < high:
         raise argparse.ArgumentTypeError(f"LOW must be under HIGH, got {text!r}")
     return low, high
