@@ -13,11 +13,18 @@ The buffer stores each observed frame once: a car's four-frame history overlaps 
 step's by three frames, so a sample keeps only its newest frame [4 channels, 84, 84] and finds
 the three before it among the samples of the same episode, which are stored contiguously
 (an episode enters the buffer whole, when it ends). 28 KB per sample instead of 113 KB.
+
+Sampling is uniform by default. With a priority exponent alpha > 0 it is prioritized by the
+student's error (Schaul et al. 2016's proportional prioritized replay, applied to imitation
+as hard-example mining): sample i is drawn with probability proportional to
+(|mu_acc,i - a_acc,i| + PRIORITY_FLOOR)^alpha, the error measured when the student drove past
+it and again each time it is trained on. No importance weights undo the bias: the point is to
+fit the rare decisions (a hard brake, a late go) the uniform mean lets the network blur.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -27,6 +34,9 @@ from algo.policy import Policy, preprocess
 CHANNELS = 4  # navigable space, path, obstacles, traffic sign (simcore.views)
 HISTORY = 4  # frames per channel in an observation, oldest first
 FRAME_SHAPE = (CHANNELS, 84, 84)
+# added to every acceleration error before it becomes a priority [normalised units; 0.05 = 0.15 m/s^2]:
+# a sample the student already fits keeps a chance to be drawn again and show it has drifted
+PRIORITY_FLOOR = 0.05
 
 
 def newest_frames(views: np.ndarray) -> np.ndarray:
@@ -52,30 +62,38 @@ class Episode:
     scalars: list[np.ndarray]  # each [2] float32: speed, target speed [m/s]
     targets: list[np.ndarray]  # each [2] float32: the teacher's action in normalised units [-1, 1]
     rewards: list[tuple[float, float]]  # (r_acc, r_sa) per step
+    # per step, |student's acceleration mean - teacher's label| (normalised units) when measured; empty: not
+    errors: list[float] = field(default_factory=list)
 
     @classmethod
     def empty(cls) -> "Episode":
-        return cls([], [], [], [])
+        return cls([], [], [], [], [])
 
     def __len__(self) -> int:
         return len(self.frames)
 
 
 class DemonstrationBuffer:
-    """A first-in first-out store of whole episodes, sampled uniformly by step.
+    """A first-in first-out store of whole episodes, sampled by step: uniformly, or by the
+    student's error when ``priority_exponent`` > 0 (module docstring).
 
     ``add`` takes a finished episode; ``terminal`` says whether it ended by itself (goal, crash,
     off path, time over), so that its discounted returns are exact value targets. An episode cut
     short (a sign change, or collection stopping) keeps its action labels but trains no value.
     """
 
-    def __init__(self, capacity: int, gamma: float):
+    def __init__(self, capacity: int, gamma: float, priority_exponent: float = 0.0):
         if capacity < 1:
             raise ValueError(f"capacity must be >= 1 sample, got {capacity}")
         if not 0.0 < gamma <= 1.0:
             raise ValueError(f"gamma must be in (0, 1], got {gamma}")
+        if not 0.0 <= priority_exponent < float("inf"):
+            raise ValueError(f"priority_exponent must be >= 0 (0: uniform sampling), got {priority_exponent}")
         self.capacity = capacity
         self.gamma = gamma
+        self.priority_exponent = priority_exponent
+        # (error + PRIORITY_FLOOR) ** priority_exponent per row; used only when priority_exponent > 0
+        self.priorities = np.ones(capacity, dtype=np.float64)
         self.frames = np.zeros((capacity, *FRAME_SHAPE), dtype=np.uint8)
         self.scalars = np.zeros((capacity, 2), dtype=np.float32)
         self.targets = np.zeros((capacity, 2), dtype=np.float32)
@@ -90,7 +108,7 @@ class DemonstrationBuffer:
     @property
     def nbytes(self) -> int:
         return sum(a.nbytes for a in (self.frames, self.scalars, self.targets, self.returns,
-                                      self.value_known, self.episode_start))
+                                      self.value_known, self.episode_start, self.priorities))
 
     def add(self, episode: Episode, terminal: bool) -> None:
         n = len(episode)
@@ -98,9 +116,17 @@ class DemonstrationBuffer:
             return
         if n > self.capacity:  # keep the newest steps; their history reaches back at most 3 of them
             episode = Episode(episode.frames[-self.capacity:], episode.scalars[-self.capacity:],
-                              episode.targets[-self.capacity:], episode.rewards[-self.capacity:])
+                              episode.targets[-self.capacity:], episode.rewards[-self.capacity:],
+                              episode.errors[-self.capacity:])
             n = self.capacity
+        if episode.errors and len(episode.errors) != n:
+            raise ValueError(f"an episode of {n} steps with {len(episode.errors)} errors: one per step, or none")
         rows = np.arange(self.added, self.added + n) % self.capacity
+        if self.priority_exponent > 0:
+            if episode.errors:
+                self.priorities[rows] = self._priority(np.asarray(episode.errors, dtype=np.float64))
+            else:  # not measured: as likely as the likeliest stored sample, so that it is measured soon
+                self.priorities[rows] = self.priorities[self._stored_rows()].max() if len(self) else 1.0
         self.frames[rows] = np.stack(episode.frames)
         self.scalars[rows] = np.stack(episode.scalars)
         self.targets[rows] = np.stack(episode.targets)
@@ -118,7 +144,23 @@ class DemonstrationBuffer:
         low = oldest + (HISTORY - 1 if self.added > self.capacity else 0)
         if self.added - low <= 0:
             raise ValueError("the buffer holds no sample with its whole history yet")
-        return rng.integers(low, self.added, size=batch)
+        if self.priority_exponent == 0:
+            return rng.integers(low, self.added, size=batch)
+        cumulative = np.cumsum(self.priorities[np.arange(low, self.added) % self.capacity])
+        picks = np.searchsorted(cumulative, rng.random(batch) * cumulative[-1], side="right")
+        return low + np.minimum(picks, len(cumulative) - 1)
+
+    def update_priorities(self, indices: np.ndarray, errors: np.ndarray) -> None:
+        """Set the priorities of the samples at absolute ``indices`` from the student's acceleration
+        errors [normalised units] just measured on them (no effect under uniform sampling)."""
+        if self.priority_exponent > 0:
+            self.priorities[np.asarray(indices) % self.capacity] = self._priority(np.asarray(errors, np.float64))
+
+    def _priority(self, errors: np.ndarray) -> np.ndarray:
+        return (np.abs(errors) + PRIORITY_FLOOR) ** self.priority_exponent
+
+    def _stored_rows(self) -> np.ndarray:
+        return np.arange(max(0, self.added - self.capacity), self.added) % self.capacity
 
     def observations(self, indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Views [B, 16, 84, 84] uint8 (c*4 + k, k = 3 newest) and scalars [B, 2] of the samples."""
@@ -140,13 +182,16 @@ BRAKE_LABEL = -0.5
 
 
 def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: float,
-                   brake_weight: float = 1.0) -> tuple[torch.Tensor, dict]:
+                   brake_weight: float = 1.0, return_errors: bool = False):
     """Mean squared error of both means against the teacher's actions (normalised units), plus
     ``value_coef`` times that of both values against the discounted returns where they are known.
 
     ``brake_weight`` > 1 counts each sample whose acceleration label is a hard braking decision
     (``BRAKE_LABEL``) that many times in the acceleration error's weighted mean: those samples are
-    few (7% of car-steps on hard) and decide the crashes."""
+    few (7% of car-steps on hard) and decide the crashes.
+
+    Returns the loss and its parts as floats; with ``return_errors`` also each sample's
+    |mu_acc - label| [B] (normalised units), the priorities of prioritized sampling."""
     views, scalars = preprocess(batch["views"], batch["scalars"])
     mu_acc, v_acc, mu_sa, v_sa = policy(views, scalars)
     targets = torch.from_numpy(batch["targets"])
@@ -162,4 +207,6 @@ def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: flo
     metrics = {name: float(value.detach()) for name, value in (
         ("action_loss_acc", action_loss_acc), ("action_loss_sa", action_loss_sa),
         ("value_loss_acc", value_loss_acc), ("value_loss_sa", value_loss_sa))}
+    if return_errors:
+        return loss, metrics, (mu_acc - targets[:, 0]).detach().abs().numpy()
     return loss, metrics

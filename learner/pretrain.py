@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from algo.imitation import DemonstrationBuffer, Episode, imitation_loss, newest_frames
+from algo.imitation import BRAKE_LABEL, DemonstrationBuffer, Episode, imitation_loss, newest_frames
 from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy, views_record, widen
 from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S, SIGHTS
 
@@ -64,6 +64,9 @@ class PretrainConfig:
     teacher_blocker_patience_s: float = BLOCKER_PATIENCE_S
     teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
     brake_weight: float = 1.0  # weight of the teacher's hard-braking labels in the action loss (imitation_loss)
+    # draw training samples with probability ~ (student's acceleration error + floor) ** this; 0: uniformly
+    # (algo.imitation's prioritized sampling)
+    priority_exponent: float = 0.0
     buffer_samples: int = 40_000  # replay capacity, 28 KB per sample
     delay_max_s: float | None = None  # waits between a lane's episodes (None: the scenario's)
     seed: int = 0
@@ -110,6 +113,8 @@ class Pretrainer:
             raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
         if not config.brake_weight > 0:
             raise ValueError(f"brake_weight must be > 0, got {config.brake_weight}")
+        if not 0.0 <= config.priority_exponent < float("inf"):
+            raise ValueError(f"priority_exponent must be >= 0 (0: uniform), got {config.priority_exponent}")
         if config.average_half_life is not None and not 0.0 < config.average_half_life < float("inf"):
             raise ValueError(f"average_half_life must be > 0 Adam steps or None, got {config.average_half_life}")
         self.config = config
@@ -133,7 +138,7 @@ class Pretrainer:
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
         self.teacher = scripted_driver(self.sim, teacher_options)
-        self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma)
+        self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma, config.priority_exponent)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()
         slots = self.sim.num_slots
@@ -163,16 +168,22 @@ class Pretrainer:
             teacher_actions = self.teacher.act()  # once per step: it keeps each car's waiting time
             actions = teacher_actions.copy()
             present = np.flatnonzero(sim.learners_present)
-            if (~self.by_teacher[present]).any():
+            prioritized = self.config.priority_exponent > 0  # then the student's error is measured on every car
+            errors = None
+            if prioritized or (~self.by_teacher[present]).any():
                 student_actions = student.act(result)
                 actions[~self.by_teacher] = student_actions[~self.by_teacher]
             frames = newest_frames(result.views[present])
             targets = np.clip(teacher_actions[present] / ACTION_SCALE, -1.0, 1.0).astype(np.float32)
+            if prioritized:
+                errors = np.abs(student_actions[present, 0] / ACTION_SCALE[0] - targets[:, 0])
             for k, slot in enumerate(present.tolist()):
                 episode = self.episodes[slot]
                 episode.frames.append(frames[k].copy())
                 episode.scalars.append(result.scalars[slot].copy())
                 episode.targets.append(targets[k])
+                if errors is not None:
+                    episode.errors.append(float(errors[k]))
             self.result = result = sim.step(actions)
             for slot in present.tolist():
                 self.episodes[slot].rewards.append((float(result.reward_acc[slot]), float(result.reward_sa[slot])))
@@ -186,11 +197,16 @@ class Pretrainer:
                     self.episodes_finished[driver] += 1
 
     def train(self, updates: int) -> dict:
-        """``updates`` Adam steps on minibatches drawn uniformly from the buffer; mean losses."""
+        """``updates`` Adam steps on minibatches drawn from the buffer (uniformly, or by the student's
+        error: ``priority_exponent``); mean losses and the share of hard-braking labels drawn."""
         totals: dict[str, float] = {}
         for _ in range(updates):
-            batch = self.buffer.batch(self.buffer.sample_indices(self.config.batch_size, self.rng))
-            loss, metrics = imitation_loss(self.policy, batch, self.config.value_coef, self.config.brake_weight)
+            indices = self.buffer.sample_indices(self.config.batch_size, self.rng)
+            batch = self.buffer.batch(indices)
+            loss, metrics, errors = imitation_loss(self.policy, batch, self.config.value_coef,
+                                                   self.config.brake_weight, return_errors=True)
+            self.buffer.update_priorities(indices, errors)
+            metrics["brake_label_share"] = float((batch["targets"][:, 0] <= BRAKE_LABEL).mean())
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(self.policy.parameters(), 40.0)

@@ -67,6 +67,44 @@ def test_a_full_buffer_forgets_the_oldest_samples_and_never_samples_a_broken_his
         DemonstrationBuffer(capacity=0, gamma=0.9)
 
 
+def test_prioritized_sampling_draws_each_sample_in_proportion_to_its_error_plus_the_floor():
+    from algo.imitation import PRIORITY_FLOOR
+
+    buffer = DemonstrationBuffer(capacity=100, gamma=0.9, priority_exponent=1.0)
+    measured = episode(4, first_value=0)
+    measured.errors = [0.0, 0.95, 0.0, 0.45]  # priorities 0.05, 1.0, 0.05, 0.5 (floor 0.05)
+    buffer.add(measured, terminal=True)
+    drawn = buffer.sample_indices(60_000, np.random.default_rng(0))
+    share = np.bincount(drawn, minlength=4) / len(drawn)
+    expected = (np.array(measured.errors) + PRIORITY_FLOOR) / (np.sum(measured.errors) + 4 * PRIORITY_FLOOR)
+    assert share == pytest.approx(expected, abs=0.01)  # 0.031, 0.625, 0.031, 0.313
+    # an episode the student did not measure is as likely as the likeliest stored sample (1.0)
+    buffer.add(episode(2, first_value=10), terminal=True)
+    assert buffer.priorities[4:6].tolist() == [1.0, 1.0]
+    # training measures again: sample 1 now fits, sample 0 does not
+    buffer.update_priorities(np.array([0, 1]), np.array([0.95, 0.0]))
+    share = np.bincount(buffer.sample_indices(60_000, np.random.default_rng(1)), minlength=6) / 60_000
+    assert share[0] > 0.25 > 0.03 > share[1]  # 1.0 / 3.6 against 0.05 / 3.6
+    with pytest.raises(ValueError, match="one per step"):
+        wrong = episode(3, first_value=0)
+        wrong.errors = [0.1]
+        buffer.add(wrong, terminal=True)
+    with pytest.raises(ValueError, match="priority_exponent"):
+        DemonstrationBuffer(capacity=10, gamma=0.9, priority_exponent=-1.0)
+
+
+def test_uniform_sampling_is_unchanged_and_ignores_priorities():
+    """Exponent 0 (the default) draws exactly what runs before prioritized sampling drew."""
+    buffer = DemonstrationBuffer(capacity=50, gamma=0.9)
+    measured = episode(20, first_value=0)
+    measured.errors = [float(t == 3) for t in range(20)]
+    buffer.add(measured, terminal=True)
+    buffer.update_priorities(np.arange(5), np.ones(5))
+    assert buffer.sample_indices(500, np.random.default_rng(3)).tolist() == \
+        np.random.default_rng(3).integers(0, 20, size=500).tolist()
+    assert (buffer.priorities == 1.0).all()
+
+
 def _a_network_and_its_outputs_on_four_samples():
     """A seeded random network, a batch of 4 samples and its (mu_acc, v_acc, mu_sa, v_sa) on them."""
     from algo.policy import preprocess
@@ -104,6 +142,37 @@ def test_brake_weight_counts_hard_braking_labels_that_many_times():
     assert plain["action_loss_acc"] == pytest.approx(squared.mean(), rel=1e-5)
     by_hand = (5.0 * squared[:2].sum() + squared[2:].sum()) / (5.0 * 2 + 2)
     assert weighted["action_loss_acc"] == pytest.approx(by_hand, rel=1e-5)
+
+
+def test_imitation_loss_returns_each_samples_acceleration_error_on_request():
+    policy, batch, (mu_acc, _, _, _) = _a_network_and_its_outputs_on_four_samples()
+    loss, metrics, errors = imitation_loss(policy, batch, value_coef=0.0, return_errors=True)
+    assert errors.shape == (4,)
+    assert errors == pytest.approx(np.abs(mu_acc.numpy() - batch["targets"][:, 0]), abs=1e-6)
+    assert metrics["action_loss_acc"] == pytest.approx(float((errors.astype(np.float64) ** 2).mean()), rel=1e-5)
+
+
+def test_prioritized_pretraining_measures_the_students_errors_and_draws_more_braking_labels():
+    """--priority-exponent: every stored step carries the student's error from collection, training
+    re-measures what it draws, and the draws lean to what the student gets wrong (hard brakes)."""
+    from learner.pretrain import PretrainConfig, Pretrainer
+
+    shares = {}
+    for exponent in (0.0, 2.0):
+        trainer = Pretrainer(PretrainConfig(scenario="easy", teacher_half_life=float("inf"), torch_threads=1,
+                                            priority_exponent=exponent, seed=5))
+        trainer.collect(400)
+        stored = trainer.buffer.priorities[: trainer.buffer.added]
+        if exponent == 0:
+            assert (stored == 1.0).all()
+        else:  # measured on every step: the untrained student is off by different amounts
+            assert len(np.unique(stored)) > 50 and stored.min() >= 0.05 ** 2
+        shares[exponent] = trainer.train(40)["brake_label_share"]
+        labels = trainer.buffer.targets[: trainer.buffer.added, 0]
+        assert 0.0 < (labels <= -0.5).mean() < 0.5  # the teacher brakes hard in some steps
+    assert shares[2.0] > 2 * shares[0.0]  # measured: 0.042 -> 0.178 of draws, 3.5% of labels (seed 5)
+    with pytest.raises(ValueError, match="priority_exponent"):
+        Pretrainer(PretrainConfig(scenario="easy", priority_exponent=float("nan")))
 
 
 def test_training_on_the_teachers_labels_brings_the_network_towards_them():
@@ -204,6 +273,7 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
     (["--teacher-half-life", "0"], "--teacher-half-life"),
     (["--gamma", "1.5"], "--gamma"),
     (["--brake-weight", "0"], "--brake-weight must be > 0"),
+    (["--priority-exponent", "-1"], "--priority-exponent must be >= 0"),
     (["--teacher-approach-speed", "0"], "--teacher-approach-speed must be a speed > 0"),
     (["--teacher-approach-speed", "nan"], "--teacher-approach-speed must be a speed > 0"),
     (["--average-half-life", "0"], "--average-half-life must be > 0"),

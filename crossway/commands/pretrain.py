@@ -75,6 +75,11 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--brake-weight", type=float, default=1.0, metavar="W",
                         help="count each sample the teacher brakes hard in (-1.5 m/s2 or more) W times in the "
                              "acceleration loss: such samples are few (about 7%% on hard) and decide the crashes")
+    parser.add_argument("--priority-exponent", type=float, default=0.0, metavar="ALPHA",
+                        help="draw training samples with probability proportional to (the student's acceleration "
+                             "error + 0.15 m/s2) ** ALPHA, measured when it drove past them and each time they are "
+                             "trained on (prioritized replay as hard-example mining; docs/training.md). Default 0: "
+                             "uniformly")
     parser.add_argument("--average-half-life", type=float, default=None, metavar="UPDATES",
                         help="write as OUT/pretrained.pt a moving average of the weights over the Adam steps, "
                              "each step's weights counting 0.5**(steps since / UPDATES) (Polyak averaging: it "
@@ -124,6 +129,8 @@ def run(args) -> int:
         raise ValueError(f"--teacher-half-life must be > 0 samples, got {args.teacher_half_life}")
     if not args.brake_weight > 0:
         raise ValueError(f"--brake-weight must be > 0, got {args.brake_weight}")
+    if not 0.0 <= args.priority_exponent < float("inf"):
+        raise ValueError(f"--priority-exponent must be >= 0 (0: uniform sampling), got {args.priority_exponent}")
     if args.teacher_approach_speed is not None and not 0.0 < args.teacher_approach_speed < float("inf"):
         raise ValueError(f"--teacher-approach-speed must be a speed > 0 m/s, got {args.teacher_approach_speed}")
     for flag, value in (("--teacher-patience", args.teacher_patience),
@@ -162,7 +169,7 @@ def run(args) -> int:
         teacher_break_wait_cycles=args.teacher_break_wait_cycles,
         teacher_patience_s=args.teacher_patience, teacher_blocker_patience_s=args.teacher_blocker_patience,
         teacher_half_life=args.teacher_half_life,
-        brake_weight=args.brake_weight,
+        brake_weight=args.brake_weight, priority_exponent=args.priority_exponent,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
         torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network)
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
