@@ -32,7 +32,8 @@ from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S, SIGHTS
 
 PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
                     "action_loss_sa", "value_loss_acc", "value_loss_sa", "student_episodes",
-                    "student_reach_rate", "teacher_episodes", "teacher_reach_rate")
+                    "student_reach_rate", "teacher_episodes", "teacher_reach_rate",
+                    "brake_label_share")  # of the samples trained on, the share the teacher brakes hard in
 ROLLING_EPISODES = 200  # reach rates are over each driver's last this many finished episodes
 
 

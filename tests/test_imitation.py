@@ -258,7 +258,8 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
 
     assert policy_views(out / "pretrained.pt") == (50.0, 0.0)  # recorded: easy shows the paper's views
     rows = list(csv.DictReader((out / "progress.csv").open()))
-    assert rows and {"round", "teacher_probability", "samples", "action_loss_acc", "student_reach_rate"} <= set(rows[0])
+    assert rows and {"round", "teacher_probability", "samples", "action_loss_acc", "student_reach_rate",
+                     "brake_label_share"} <= set(rows[0])
     probabilities = [float(r["teacher_probability"]) for r in rows]
     assert len(rows) == 3 and [r["round"] for r in rows] == ["0", "1", "2"]
     # round 0's episodes (all three lanes start at once, ~13 s each) end within its 20 s
