@@ -21,7 +21,7 @@ import torch
 from algo.policy import ACTION_SCALE, Policy, PolicyConfig
 from algo.stacked import (GRID, HEADS, PATCH_FEATURES, after_conv1, conv1, conv1_gradients, first_layer_matrix,
                           patches)
-from simcore.simulator import Simulator, StepResult
+from simcore.simulator import SCALARS, Simulator, StepResult
 
 LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 
@@ -171,7 +171,7 @@ class EpisodeLearner:
     config: DA3CConfig
     patches: torch.Tensor  # [update_interval + 1, 441, 256] float: segment observations
     pre1: torch.Tensor  # [update_interval + 1, 441, 2 * C1] float: first layer's output, both heads
-    scalars: np.ndarray  # [update_interval + 1, 2] float32: speed, target speed [m/s]
+    scalars: np.ndarray  # [update_interval + 1, 3] float32: speed, target speed [m/s], standing time [s]
     actions: np.ndarray  # [update_interval, 2] float32, normalised units, unclipped samples
     rewards: np.ndarray  # [update_interval, 2] float32: R_acc, R_sa
     length: int = 0  # steps stored in the current segment
@@ -181,7 +181,7 @@ class EpisodeLearner:
     _first_layer: tuple[torch.Tensor, torch.Tensor] | None = None  # from params; reset when they change
 
     def observe(self, views: np.ndarray, scalars: np.ndarray) -> None:
-        """The observation the next action is taken from (uint8 views [16, 84, 84], speeds [2])."""
+        """The observation the next action is taken from (uint8 views [16, 84, 84], scalars [3])."""
         patches(torch.from_numpy(views), out=self.patches[self.length])
         self.scalars[self.length] = scalars
 
@@ -323,7 +323,7 @@ class ActorCore:
                 params=params, base_version=self.version, config=self.config,
                 patches=torch.zeros(n + 1, GRID * GRID, PATCH_FEATURES),
                 pre1=torch.zeros(n + 1, GRID * GRID, len(HEADS) * conv1_channels),
-                scalars=np.zeros((n + 1, 2), np.float32),
+                scalars=np.zeros((n + 1, SCALARS), np.float32),
                 actions=np.zeros((n, 2), np.float32), rewards=np.zeros((n, 2), np.float32),
             )
         learner.base_version = self.version

@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 from algo.policy import Policy, preprocess
+from simcore.simulator import SCALARS
 
 CHANNELS = 4  # navigable space, path, obstacles, traffic sign (simcore.views)
 HISTORY = 4  # frames per channel in an observation, oldest first
@@ -59,7 +60,7 @@ class Episode:
     """One car's episode as collected: a frame, scalars and a teacher label per step."""
 
     frames: list[np.ndarray]  # each [4, 84, 84] uint8
-    scalars: list[np.ndarray]  # each [2] float32: speed, target speed [m/s]
+    scalars: list[np.ndarray]  # each [3] float32: speed, target speed [m/s], standing time [s]
     targets: list[np.ndarray]  # each [2] float32: the teacher's action in normalised units [-1, 1]
     rewards: list[tuple[float, float]]  # (r_acc, r_sa) per step
     # per step, |student's acceleration mean - teacher's label| (normalised units) when measured; empty: not
@@ -95,7 +96,7 @@ class DemonstrationBuffer:
         # (error + PRIORITY_FLOOR) ** priority_exponent per row; used only when priority_exponent > 0
         self.priorities = np.ones(capacity, dtype=np.float64)
         self.frames = np.zeros((capacity, *FRAME_SHAPE), dtype=np.uint8)
-        self.scalars = np.zeros((capacity, 2), dtype=np.float32)
+        self.scalars = np.zeros((capacity, SCALARS), dtype=np.float32)
         self.targets = np.zeros((capacity, 2), dtype=np.float32)
         self.returns = np.zeros((capacity, 2), dtype=np.float32)
         self.value_known = np.zeros(capacity, dtype=bool)
@@ -163,7 +164,7 @@ class DemonstrationBuffer:
         return np.arange(max(0, self.added - self.capacity), self.added) % self.capacity
 
     def observations(self, indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Views [B, 16, 84, 84] uint8 (c*4 + k, k = 3 newest) and scalars [B, 2] of the samples."""
+        """Views [B, 16, 84, 84] uint8 (c*4 + k, k = 3 newest) and scalars [B, 3] of the samples."""
         start = self.episode_start[indices % self.capacity]
         history = np.maximum(indices[:, None] - np.arange(HISTORY - 1, -1, -1)[None, :], start[:, None])  # [B, k]
         frames = self.frames[history % self.capacity]  # [B, k, c, 84, 84]

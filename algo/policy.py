@@ -30,6 +30,9 @@ from simcore.views import VIEW_EXTENT_M
 VIEW_SHAPE = (16, 84, 84)
 CONV2_CELLS = 10 * 10  # the second convolution's output grid over 84 x 84 views
 SPEED_SCALE = 10.0  # speeds are divided by this before entering the network [m/s]
+# the standing-time input (not the paper's): clipped at STANDING_CLIP_S, then divided by STANDING_SCALE_S [s]
+STANDING_SCALE_S = 10.0
+STANDING_CLIP_S = 30.0
 ACTION_SCALE = np.array([MAX_ACCELERATION, MAX_STEERING], dtype=np.float32)  # [m/s^2, rad]
 # the view square (side, centre ahead of the car) [m] of a file that does not record one: every
 # file written before checkpoints recorded it learnt from the paper's views
@@ -43,6 +46,14 @@ class PolicyConfig:
     conv1_channels: int = 16  # 4x4 stride-4 convolution over the 16 input planes
     conv2_channels: int = 16  # 3x3 stride-2 convolution
     hidden: int = 128  # fully connected layer after the convolutions, scalars appended
+    # a third scalar beside speed and target speed: how long the car has stood [s] (not in the paper;
+    # a clock the four frames, 0.3 s, cannot show and the scripted teacher's patience reads)
+    standing_input: bool = False
+
+    @property
+    def scalar_inputs(self) -> int:
+        """Columns of ``simcore.simulator.StepResult.scalars`` the network reads (the first ones)."""
+        return 3 if self.standing_input else 2
 
 
 class SubModule(nn.Module):
@@ -52,16 +63,18 @@ class SubModule(nn.Module):
         super().__init__()
         self.conv1 = nn.Conv2d(VIEW_SHAPE[0], config.conv1_channels, kernel_size=4, stride=4)
         self.conv2 = nn.Conv2d(config.conv1_channels, config.conv2_channels, kernel_size=3, stride=2)
-        self.hidden = nn.Linear(config.conv2_channels * CONV2_CELLS + 2, config.hidden)
+        self.scalar_inputs = config.scalar_inputs
+        self.hidden = nn.Linear(config.conv2_channels * CONV2_CELLS + config.scalar_inputs, config.hidden)
         self.mu = nn.Linear(config.hidden, 1)
         self.value = nn.Linear(config.hidden, 1)
         nn.init.uniform_(self.mu.weight, -3e-3, 3e-3)  # start near mu = 0: explore symmetrically
         nn.init.zeros_(self.mu.bias)
 
     def forward(self, views: torch.Tensor, scalars: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``scalars`` [B, >= scalar_inputs] as ``preprocess`` scales them; the first columns are read."""
         h = torch.relu(self.conv1(views))
         h = torch.relu(self.conv2(h))
-        h = torch.relu(self.hidden(torch.cat([h.flatten(1), scalars], dim=1)))
+        h = torch.relu(self.hidden(torch.cat([h.flatten(1), first_scalars(scalars, self.scalar_inputs)], dim=1)))
         return torch.tanh(self.mu(h)).squeeze(1), self.value(h).squeeze(1)
 
 
@@ -91,14 +104,14 @@ def widen(policy: Policy, config: PolicyConfig, seed: int = 0) -> Policy:
     """
     old = policy.config
     sizes = ("conv1_channels", "conv2_channels", "hidden")
-    if any(getattr(config, name) < getattr(old, name) for name in sizes):
-        raise ValueError(f"cannot widen the network {asdict(old)} to {asdict(config)}: a layer would shrink (a "
-                         "network can only be widened)")
+    if any(getattr(config, name) < getattr(old, name) for name in sizes) or config.scalar_inputs < old.scalar_inputs:
+        raise ValueError(f"cannot widen the network {asdict(old)} to {asdict(config)}: a layer would shrink or an "
+                         "input go (a network can only be widened)")
     with torch.random.fork_rng(devices=[]):  # the caller's random stream stays as it was
         torch.manual_seed(seed)
         wide = Policy(config)
     c1, c2, h = old.conv1_channels, old.conv2_channels, old.hidden
-    features = CONV2_CELLS * c2  # the old hidden layer's inputs from the views; the two speeds follow
+    features = CONV2_CELLS * c2  # the old hidden layer's inputs from the views; the scalars follow
     wide_features = CONV2_CELLS * config.conv2_channels
     with torch.no_grad():
         for head in ("acc", "sa"):
@@ -110,7 +123,8 @@ def widen(policy: Policy, config: PolicyConfig, seed: int = 0) -> Policy:
             new.conv2.bias[:c2] = was.conv2.bias
             new.hidden.weight[:h] = 0.0  # old units read nothing from new conv2 channels
             new.hidden.weight[:h, :features] = was.hidden.weight[:, :features]  # channel-major, as flattened
-            new.hidden.weight[:h, wide_features:] = was.hidden.weight[:, features:]  # speed, target speed
+            # speed, target speed (and standing time); a new standing-time input starts unread (zero weights)
+            new.hidden.weight[:h, wide_features:wide_features + old.scalar_inputs] = was.hidden.weight[:, features:]
             new.hidden.bias[:h] = was.hidden.bias
             for out in ("mu", "value"):
                 layer, old_layer = getattr(new, out), getattr(was, out)
@@ -122,10 +136,28 @@ def widen(policy: Policy, config: PolicyConfig, seed: int = 0) -> Policy:
 
 
 def preprocess(views: np.ndarray, scalars: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
-    """uint8 views [B, 16, 84, 84] and speeds [B, 2] m/s to network inputs in [0, 1]."""
+    """uint8 views [B, 16, 84, 84] and scalars [B, 2 or 3] (speed, target speed [m/s], standing
+    time [s]) to network inputs: views in [0, 1], scalars as ``scale_scalars``."""
     v = torch.from_numpy(np.ascontiguousarray(views)).float().div_(255.0)
-    s = torch.from_numpy(np.ascontiguousarray(scalars, dtype=np.float32)) / SPEED_SCALE
-    return v, s
+    return v, scale_scalars(torch.from_numpy(np.ascontiguousarray(scalars, dtype=np.float32)))
+
+
+def scale_scalars(scalars: torch.Tensor) -> torch.Tensor:
+    """[..., 2 or 3] speed, target speed [m/s] (, standing time [s]) to the network's units:
+    speeds / SPEED_SCALE, standing time clipped at STANDING_CLIP_S and / STANDING_SCALE_S."""
+    scaled = scalars[..., :2] / SPEED_SCALE
+    if scalars.shape[-1] < 3:
+        return scaled
+    standing = scalars[..., 2:3].clamp(max=STANDING_CLIP_S) / STANDING_SCALE_S
+    return torch.cat([scaled, standing], dim=-1)
+
+
+def first_scalars(scalars: torch.Tensor, count: int) -> torch.Tensor:
+    """The first ``count`` scalar columns; a clear error when the caller passed fewer."""
+    if scalars.shape[-1] < count:
+        raise ValueError(f"this network reads {count} scalars (speed, target speed, standing time), got "
+                         f"{scalars.shape[-1]}")
+    return scalars[..., :count]
 
 
 def sigma_at(agent_steps: int, decay_agent_steps: int, start: float = 0.65, end: float = 0.05) -> float:

@@ -27,7 +27,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from algo.policy import SPEED_SCALE, VIEW_SHAPE
+from algo.policy import VIEW_SHAPE, first_scalars, scale_scalars
 
 HEADS = ("acc", "sa")
 PATCH = 4  # first-layer kernel and stride [px]
@@ -92,7 +92,8 @@ def after_conv1(pre1: torch.Tensor, scalars: torch.Tensor,
                 params: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
     """The rest of both sub-modules from the first layer's pre-activation, for B weight sets.
 
-    ``pre1`` [B, N, 441, 2*C1] (acc channels first), ``scalars`` [B, N, 2] in m/s, ``params``
+    ``pre1`` [B, N, 441, 2*C1] (acc channels first), ``scalars`` [B, N, >= 2] as the simulator gives
+    them (m/s, s; the network reads as many as its hidden layer takes), ``params``
     with leading dimension B. Returns Gaussian means and values, each [B, N, 2] (acc, sa): the
     same function as ``algo.policy.Policy`` after its first convolutions.
     """
@@ -105,10 +106,11 @@ def after_conv1(pre1: torch.Tensor, scalars: torch.Tensor,
     b2 = torch.stack([params[f"{head}.conv2.bias"] for head in HEADS], dim=1)  # [B, 2, C2]
     h2 = torch.relu(F.conv2d(x, w2.reshape(-1, *w2.shape[3:]), b2.reshape(-1), stride=2, groups=2 * b))
     h2 = h2.reshape(n, b, 2, -1)  # per head, channel-major: the order of Policy's flatten
-    speeds = scalars / SPEED_SCALE
+    read = params["acc.hidden.weight"].shape[-1] - h2.shape[-1]  # 2, or 3 with the standing-time input
+    inputs = first_scalars(scale_scalars(scalars), read)
     mus, values = [], []
     for h, head in enumerate(HEADS):
-        x3 = torch.cat([h2[:, :, h].transpose(0, 1), speeds], dim=2)  # [B, N, C2*100 + 2]
+        x3 = torch.cat([h2[:, :, h].transpose(0, 1), inputs], dim=2)  # [B, N, C2*100 + 2 or 3]
         h3 = torch.relu(_linear(x3, params[f"{head}.hidden.weight"], params[f"{head}.hidden.bias"]))
         mus.append(torch.tanh(_linear(h3, params[f"{head}.mu.weight"], params[f"{head}.mu.bias"])))
         values.append(_linear(h3, params[f"{head}.value.weight"], params[f"{head}.value.bias"]))

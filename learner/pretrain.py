@@ -20,7 +20,7 @@ import csv
 import json
 import time
 from collections import deque
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +78,9 @@ class PretrainConfig:
     # the network's sizes (conv1 channels, conv2 channels, hidden units); with init_from, the loaded
     # network is widened to them keeping its function (algo.policy.widen). None: the file's, or the default
     network: tuple[int, int, int] | None = None
+    # give the network a third scalar input, the time the car has stood [s] (algo.policy.PolicyConfig);
+    # a loaded network gets it with zero weights (unread until training moves them). Not the paper's
+    standing_input: bool = False
 
 
 def _config_dict(config: PretrainConfig) -> dict:
@@ -121,15 +124,18 @@ class Pretrainer:
         self.config = config
         torch.manual_seed(config.seed)
         torch.set_num_threads(config.torch_threads)
-        sizes = None if config.network is None else PolicyConfig(*config.network)
-        if sizes is not None and min(config.network) < 1:
+        if config.network is not None and min(config.network) < 1:
             raise ValueError(f"network sizes must be >= 1, got {config.network}")
+        sizes = {} if config.network is None else dict(zip(("conv1_channels", "conv2_channels", "hidden"),
+                                                            config.network))
         if config.init_from is not None:
             self.policy = load_policy(config.init_from)
-            if sizes is not None and sizes != self.policy.config:
-                self.policy = widen(self.policy, sizes, seed=config.seed)
+            wanted = replace(self.policy.config, **sizes,
+                             standing_input=self.policy.config.standing_input or config.standing_input)
+            if wanted != self.policy.config:
+                self.policy = widen(self.policy, wanted, seed=config.seed)
         else:
-            self.policy = Policy(sizes or PolicyConfig())
+            self.policy = Policy(PolicyConfig(**sizes, standing_input=config.standing_input))
         self.policy.train()
         self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=config.learning_rate)
         # the moving average of the weights (average_half_life), starting at the initial ones
@@ -259,7 +265,8 @@ class Pretrainer:
 
 
 def _sizes(config: PolicyConfig) -> str:
-    return f"{config.conv1_channels},{config.conv2_channels},{config.hidden} (conv1, conv2, hidden per head)"
+    inputs = ", reads its standing time" if config.standing_input else ""
+    return f"{config.conv1_channels},{config.conv2_channels},{config.hidden} (conv1, conv2, hidden per head){inputs}"
 
 
 def _fmt(rate: float | None) -> str:

@@ -61,7 +61,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simcore.dynamics import DT, MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
+from simcore.dynamics import DT, MAX_ACCELERATION, MAX_STEERING, STANDING_MPS, VEHICLE_LENGTH, WHEELBASE
 from simcore.rightofway import SIGN_RANK, Sign
 from simcore.simulator import Simulator
 from simcore.views import VIEW_EXTENT_M, may_show
@@ -75,7 +75,6 @@ VIEW_SIGHT_M = 0.5 * VIEW_EXTENT_M  # half-side of the square the paper's views 
 APPROACH_DECELERATION = 2.0  # comfortable braking towards a conflict zone's approach speed [m/s^2]
 APPROACH_SIGNS = ("all", "own")  # which signs decide the zones to approach slowly (ScriptedDriver)
 SIGHTS = ("full", "view")  # what the scripted driver sees (DriverOptions.sight)
-STANDING_MPS = 0.5  # a car slower than this stands (patience counts) [m/s]
 BLOCKER_PATIENCE_S = 8.0  # after standing this long, ignore the cars in its way (brake_for_blockers) [s]
 
 

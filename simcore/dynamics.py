@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 DT = 0.1  # simulation step: the network acts every 100 ms [s] (paper, "Training settings")
+STANDING_MPS = 0.5  # a car slower than this stands: the scripted driver's patience and the standing-time input count [m/s]
 MAX_STEERING = 0.2  # [rad] (paper, "Training settings")
 MAX_ACCELERATION = 3.0  # [m/s^2] (paper, "Training settings")
 MAX_SPEED = 20.0  # physical cap; agents are rewarded for staying at or under target speed [m/s]

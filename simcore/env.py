@@ -6,9 +6,10 @@ random wait of paper, "Training settings") and leave when it ends, and a name ne
 as PettingZoo requires. The learner behind a lane is the same network throughout; only the
 PettingZoo identity is per episode.
 
-- observation: ``Dict(views=Box(0, 255, (16, 84, 84), uint8), scalars=Box(0, inf, (2,), float32))``;
+- observation: ``Dict(views=Box(0, 255, (16, 84, 84), uint8), scalars=Box(0, inf, (3,), float32))``;
   ``views[c*4 + k]`` is channel ``c`` (navigable, path, obstacles, sign) at frame ``k`` (3 newest);
-  ``scalars`` is [speed, target speed] in m/s.
+  ``scalars`` is [speed, target speed] in m/s (the paper's) and the time the car has stood in s
+  (``simcore.simulator.SCALARS``; networks read the third only when built with it).
 - action: ``Box([-3, -0.2], [3, 0.2], float32)``: acceleration [m/s^2], steering [rad]; values
   outside are clipped; NaN or a wrong shape raises ``ValueError``.
 - reward: ``R_acc + R_sa`` (paper, "Reward Shaping"); ``infos[agent]`` carries the two streams
@@ -32,7 +33,7 @@ from pettingzoo import ParallelEnv
 from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING, MAX_SPEED
 from simcore.rewards import END_REASON_NAMES, EndReason
 from simcore.scenario import ScenarioSpec
-from simcore.simulator import CHANNELS, HISTORY, SimConfig, Simulator
+from simcore.simulator import CHANNELS, HISTORY, SCALARS, SimConfig, Simulator
 from simcore.views import VIEW_SIZE_PX
 
 
@@ -56,7 +57,8 @@ class IntersectionParallelEnv(ParallelEnv):
         self._last_result = None
         self._observation_space = gymnasium.spaces.Dict({
             "views": gymnasium.spaces.Box(0, 255, (CHANNELS * HISTORY, VIEW_SIZE_PX, VIEW_SIZE_PX), np.uint8),
-            "scalars": gymnasium.spaces.Box(0.0, np.float32(MAX_SPEED), (2,), np.float32),
+            "scalars": gymnasium.spaces.Box(np.zeros(SCALARS, np.float32),
+                                            np.array([MAX_SPEED, MAX_SPEED, np.inf], np.float32), (SCALARS,), np.float32),
         })
         self._action_space = gymnasium.spaces.Box(
             np.array([-MAX_ACCELERATION, -MAX_STEERING], dtype=np.float32),

@@ -29,6 +29,7 @@ from simcore.dynamics import (
     INITIAL_SPEED_RANGE,
     MAX_ACCELERATION,
     MAX_STEERING,
+    STANDING_MPS,
     TARGET_SPEED_RANGE,
     VEHICLE_LENGTH,
     VEHICLE_WIDTH,
@@ -113,13 +114,18 @@ class EpisodeSummary:
     target_speed_mps: float = 0.0  # the episode's target speed [m/s]
 
 
+SCALARS = 3  # columns of StepResult.scalars: speed, target speed [m/s], standing time [s]
+
+
 @dataclass
 class StepResult:
     """Everything one step produced, indexed by slot. Arrays are views into the simulator's
     buffers: valid until the next step; copy what you keep."""
 
     views: np.ndarray  # [slots, 16, 84, 84] uint8, channel c frame k at index c*4+k (k=3 newest)
-    scalars: np.ndarray  # [slots, 2] float32: speed, target speed [m/s]
+    # [slots, 3] float32: speed, target speed [m/s] (the paper's two scalars) and how long the car has
+    # stood (slower than STANDING_MPS) up to this step [s], an input only networks built with it read
+    scalars: np.ndarray
     observed: np.ndarray  # [slots] bool: rows of views/scalars that are valid this step
     acted: np.ndarray  # [slots] bool: cars whose action was applied this step
     reward_acc: np.ndarray  # [slots] float32, valid where acted
@@ -247,7 +253,8 @@ class Simulator:
         self.next_sign_change_s = math.inf
         learners = self.num_slots
         self._history = np.zeros((learners, CHANNELS, HISTORY, VIEW_SIZE_PX * VIEW_SIZE_PX), dtype=np.uint8)
-        self._scalars = np.zeros((learners, 2), dtype=np.float32)
+        self._scalars = np.zeros((learners, SCALARS), dtype=np.float32)
+        self._standing_s = np.zeros(learners)  # time each learner has stood, this step included [s]
 
     @property
     def learners_present(self) -> np.ndarray:
@@ -558,6 +565,8 @@ class Simulator:
         self.return_acc[slot] = 0.0
         self.return_sa[slot] = 0.0
         self.episode_count[slot] += 1
+        if slot < self.num_slots:
+            self._standing_s[slot] = 0.0
         self.present[slot] = True
 
     def _skip_idle(self, result: StepResult) -> None:
@@ -581,6 +590,8 @@ class Simulator:
         result.observed[idx] = True
         self._scalars[idx, 0] = self.speed[idx]
         self._scalars[idx, 1] = self.target_speed[idx]
+        self._standing_s[idx] = np.where(self.speed[idx] < STANDING_MPS, self._standing_s[idx] + DT, 0.0)
+        self._scalars[idx, 2] = self._standing_s[idx]
         if self.renderer is None or len(idx) == 0:
             return
         # every car on the road is drawn, traffic included; the egos are the learners in ``idx``

@@ -350,3 +350,49 @@ def test_widen_refuses_a_smaller_network():
 
     with pytest.raises(ValueError, match="cannot widen"):
         widen(Policy(PolicyConfig()), PolicyConfig(hidden=64))
+    with pytest.raises(ValueError, match="an input go"):
+        widen(Policy(PolicyConfig(standing_input=True)), PolicyConfig())
+
+
+@pytest.mark.parametrize("sizes", [(16, 16, 128), (16, 32, 256)])
+def test_the_standing_time_input_starts_unread_and_then_learns(sizes):
+    """widen to standing_input: the same function whatever the standing time, until training moves
+    the new input's weights; a network without the input never reads a third scalar column."""
+    from algo.policy import Policy, PolicyConfig, preprocess, widen
+
+    torch.manual_seed(0)
+    paper = Policy(PolicyConfig())
+    clocked = widen(paper, PolicyConfig(*sizes, standing_input=True), seed=1)
+    assert clocked.acc.hidden.in_features == 100 * sizes[1] + 3
+    views = np.random.default_rng(2).integers(0, 256, (4, 16, 84, 84), dtype=np.uint8)
+    scalars = np.array([[3.0, 8.0, standing] for standing in (0.0, 1.0, 5.0, 40.0)], np.float32)
+    inputs = preprocess(views, scalars)
+    assert inputs[1][:, 2].tolist() == pytest.approx([0.0, 0.1, 0.5, 3.0])  # / 10 s, clipped at 30 s
+    for a, b in zip(paper(*inputs), clocked(*inputs)):
+        assert torch.allclose(a, b, atol=1e-5)
+    for a, b in zip(paper(*inputs), paper(*preprocess(views, scalars[:, :2]))):
+        assert torch.equal(a, b)  # the paper's network reads speed and target speed only
+    sum(out.pow(2).sum() for out in clocked(*inputs)).backward()
+    assert clocked.acc.hidden.weight.grad[:, -1].abs().sum() > 0  # the standing column learns at once
+    with pytest.raises(ValueError, match="reads 3 scalars"):
+        clocked(*preprocess(views, scalars[:, :2]))
+
+
+def test_matrix_form_of_a_network_with_the_standing_input_matches_its_modules():
+    from algo.policy import Policy, PolicyConfig, preprocess
+
+    torch.manual_seed(3)
+    policy = Policy(PolicyConfig(standing_input=True))
+    raw = np.random.default_rng(0).integers(0, 256, (5, 16, 84, 84), dtype=np.uint8)
+    scalars = np.random.default_rng(1).uniform(0, 12, (5, 3)).astype(np.float32)
+    weights = {name: p.detach() for name, p in policy.named_parameters()}
+    with torch.no_grad():
+        pre1 = conv1(patches(torch.from_numpy(raw)), *first_layer_matrix(weights))
+        mu, values = after_conv1(pre1[None], torch.from_numpy(scalars)[None],
+                                 {n: w.unsqueeze(0) for n, w in weights.items()})
+        mu_acc, v_acc, mu_sa, v_sa = policy(*preprocess(raw, scalars))
+        moved, _ = after_conv1(pre1[None], torch.from_numpy(scalars + np.array([0, 0, 7.0], np.float32))[None],
+                               {n: w.unsqueeze(0) for n, w in weights.items()})
+    torch.testing.assert_close(mu[0], torch.stack([mu_acc, mu_sa], 1), atol=1e-5, rtol=1e-4)
+    torch.testing.assert_close(values[0], torch.stack([v_acc, v_sa], 1), atol=1e-5, rtol=1e-4)
+    assert not torch.allclose(moved, mu)  # the standing time reaches the outputs

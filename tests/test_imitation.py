@@ -15,7 +15,7 @@ from algo.policy import Policy, load_policy
 def episode(length: int, first_value: int, rewards=None) -> Episode:
     """An episode whose step t has every pixel of its frame equal to first_value + t (channel c adds c)."""
     frames = [np.stack([np.full((84, 84), first_value + t + c, np.uint8) for c in range(4)]) for t in range(length)]
-    scalars = [np.array([float(t), 8.0], np.float32) for t in range(length)]
+    scalars = [np.array([float(t), 8.0, 0.0], np.float32) for t in range(length)]  # speed, target, standing
     targets = [np.array([0.1 * t, -0.1], np.float32) for t in range(length)]
     rewards = rewards or [(0.0, 0.0)] * length
     return Episode(frames, scalars, targets, rewards)
@@ -173,6 +173,29 @@ def test_prioritized_pretraining_measures_the_students_errors_and_draws_more_bra
     assert shares[2.0] > 2 * shares[0.0]  # measured: 0.042 -> 0.178 of draws, 3.5% of labels (seed 5)
     with pytest.raises(ValueError, match="priority_exponent"):
         Pretrainer(PretrainConfig(scenario="easy", priority_exponent=float("nan")))
+
+
+def test_a_student_given_the_standing_time_drives_as_before_and_then_learns_to_read_it(tmp_path):
+    """--standing-input on a loaded policy: the same actions at first (the input's weights are
+    zero), the buffer keeps each car's standing time, and training moves the new weights."""
+    from evaluation.policy import PolicyDriver
+    from learner.pretrain import PretrainConfig, Pretrainer
+
+    trainer = Pretrainer(PretrainConfig(scenario="easy", init_from="models/easy-student-guard.pt", standing_input=True,
+                                        teacher_half_life=float("inf"), torch_threads=1, learning_rate=1e-3))
+    assert trainer.policy.config.standing_input and not load_policy("models/easy-student-guard.pt").config.standing_input
+    result = trainer.result
+    before = PolicyDriver(trainer.sim, load_policy("models/easy-student-guard.pt")).act(result)
+    np.testing.assert_allclose(PolicyDriver(trainer.sim, trainer.policy).act(result), before, atol=1e-5)
+    trainer.collect(600)
+    standing = trainer.buffer.scalars[: trainer.buffer.added, 2]
+    assert standing.max() > 0.5  # cars stood at the junction, and the samples say how long
+    column = trainer.policy.acc.hidden.weight[:, -1]
+    assert (column == 0).all()
+    trainer.train(20)
+    assert (trainer.policy.acc.hidden.weight[:, -1] != 0).any()
+    path = trainer.export(tmp_path / "clocked.pt", note="test")
+    assert load_policy(path).config.standing_input
 
 
 def test_training_on_the_teachers_labels_brings_the_network_towards_them():

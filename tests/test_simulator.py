@@ -468,3 +468,28 @@ def test_driver_options_refuse_unknown_values_and_record_what_the_json_holds():
         "scripted_sight": "view", "scripted_approach_mps": 2.0, "scripted_approach_signs": "own",
         "scripted_brake_for_blockers": True, "scripted_wait_outside_zones": True, "scripted_break_wait_cycles": True,
         "scripted_patience_s": "never", "scripted_blocker_patience_s": 5.0}
+
+
+def test_the_third_scalar_counts_how_long_each_car_has_stood():
+    """StepResult.scalars[:, 2]: + 0.1 s per step while slower than 0.5 m/s, 0 once it moves or a
+    new episode starts (the scripted driver's patience clock, which lags it by one step)."""
+    from simcore.dynamics import DT, MAX_ACCELERATION, STANDING_MPS
+    from simcore.simulator import SCALARS
+
+    sim = Simulator("easy", SimConfig(start_all_at_reset=True), seed=0)
+    result = sim.reset()
+    assert result.scalars.shape == (sim.num_slots, SCALARS) and (result.scalars[:, 2] == 0).all()
+    brake = np.zeros((sim.num_slots, 2))
+    brake[:, 0] = -MAX_ACCELERATION
+    standing_steps = np.zeros(sim.num_slots)
+    for _ in range(40):  # from at most 6 m/s, 3 m/s^2 stops a car within 2 s
+        result = sim.step(brake)
+        on = sim.learners_present
+        standing_steps = np.where(on & (sim.speed[: sim.num_slots] < STANDING_MPS), standing_steps + 1, 0)
+        np.testing.assert_allclose(result.scalars[on, 2], DT * standing_steps[on], atol=1e-5)
+    assert result.scalars[sim.learners_present, 2].min() > 1.5  # every car has stood for a while
+    go = -brake
+    result = sim.step(go)
+    result = sim.step(go)
+    moving = sim.learners_present & (sim.speed[: sim.num_slots] >= STANDING_MPS)
+    assert moving.any() and (result.scalars[moving, 2] == 0).all()

@@ -90,6 +90,11 @@ def add_parser(subparsers) -> None:
                              "(the default network is 16,16,128). With --init-from the loaded network is widened "
                              "to these sizes computing the same function: its units keep their weights, new ones "
                              "start with zero outputs (docs/training.md). Default: the --init-from file's sizes")
+    parser.add_argument("--standing-input", action="store_true",
+                        help="give the network a third scalar beside speed and target speed: how long its car "
+                             "has stood (under 0.5 m/s) [s], the clock the teacher's --teacher-patience reads and "
+                             "four frames cannot show. Not the paper's input. With --init-from a network without "
+                             "it gets it with zero weights, driving as before until training moves them")
     parser.add_argument("--buffer-samples", type=int, default=40_000,
                         help="replay capacity in samples (28 KB each: 40,000 take 1.1 GB)")
     parser.add_argument("--delay-max", type=float, default=None, metavar="SECONDS",
@@ -155,8 +160,9 @@ def run(args) -> int:
         if args.network is not None:
             from algo.policy import PolicyConfig, widen
 
-            try:
-                widen(loaded, PolicyConfig(*args.network))  # refuses a smaller network
+            try:  # refuses a smaller network
+                widen(loaded, PolicyConfig(*args.network,
+                                           standing_input=loaded.config.standing_input or args.standing_input))
             except ValueError as error:
                 raise ValueError(f"--network {','.join(map(str, args.network))} and --init-from "
                                  f"{args.init_from}: {error}") from None
@@ -171,7 +177,8 @@ def run(args) -> int:
         teacher_half_life=args.teacher_half_life,
         brake_weight=args.brake_weight, priority_exponent=args.priority_exponent,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
-        torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network)
+        torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network,
+        standing_input=args.standing_input)
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True))
     return 0
