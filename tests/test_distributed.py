@@ -416,6 +416,26 @@ def test_train_refuses_initial_weights_that_are_not_a_checkpoint(tmp_path):
     assert not (tmp_path / "run" / "checkpoints").exists()  # nothing started
 
 
+def test_train_refuses_initial_weights_of_another_network(tmp_path):
+    """A student with the standing-time input (or widened) cannot start D-A3C, which learns the
+    paper's network: refused before any process starts, not after the actors are up."""
+    from dataclasses import asdict
+
+    import torch
+
+    from algo.policy import Policy, PolicyConfig
+
+    clocked = tmp_path / "clocked.pt"
+    policy = Policy(PolicyConfig(standing_input=True))
+    torch.save({"policy": policy.state_dict(), "policy_config": asdict(policy.config)}, clocked)
+    result = subprocess.run([sys.executable, "-m", "crossway", "train", "--run-dir", str(tmp_path / "run"),
+                             "--init-from", str(clocked), "--metrics-port", "0"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert "'standing_input': True" in result.stderr and "goes on with crossway pretrain" in result.stderr
+    assert "Traceback" not in result.stderr and not (tmp_path / "run" / "checkpoints").exists()
+
+
 def test_actor_options_reach_the_agents_config():
     """--gamma and the other agent-side options end up in the D-A3C config the actor runs with."""
     from crossway.cli import build_parser

@@ -168,9 +168,15 @@ def learner_config(args, listen: tuple[str, ...], connect: tuple[str, ...]):
     if not 0.05 <= args.sigma_start <= 2.0:
         raise ValueError(f"--sigma-start must be between 0.05 (the final sigma) and 2, got {args.sigma_start}")
     if args.init_from is not None:
-        from algo.policy import load_policy
+        from dataclasses import asdict
 
-        load_policy(args.init_from)  # fail here, before any process starts, with the file's problem
+        from algo.policy import PolicyConfig, load_policy
+
+        loaded = load_policy(args.init_from)  # fail here, before any process starts, with the file's problem
+        if loaded.config != PolicyConfig():
+            raise ValueError(f"--init-from {args.init_from}: its network {asdict(loaded.config)} is not the one D-A3C "
+                             f"trains, {asdict(PolicyConfig())} (the paper's inputs); a network widened or given "
+                             "the standing-time input by crossway pretrain goes on with crossway pretrain")
     if args.metrics_port < 0 or args.metrics_port > 65535:
         raise ValueError(f"--metrics-port must be 0-65535, got {args.metrics_port}")
     return LearnerServiceConfig(
