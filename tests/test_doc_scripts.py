@@ -135,3 +135,37 @@ def test_a_policy_driver_counts_standing_time_as_the_scripted_driver_does():
             assert abs(scripted.standing_s(slot) - policy.standing_s(slot)) < 1e-9
             stood += scripted.standing_s(slot) > 0
     assert stood > 0  # the check compared some standing cars
+
+
+def _policy_file(path, seed, **config):
+    import torch
+
+    from algo.policy import Policy, PolicyConfig
+
+    torch.manual_seed(seed)
+    policy_config = PolicyConfig(**config)
+    torch.save({"policy": Policy(policy_config).state_dict(), "policy_config": vars(policy_config)}, path)
+    return path
+
+
+def test_weight_soup_writes_the_mean_of_the_weights_and_refuses_different_networks(tmp_path):
+    import torch
+
+    from algo.policy import load_policy
+
+    script = str(ROOT / "docs/scripts/weight_soup.py")
+    first, second = _policy_file(tmp_path / "a.pt", 1), _policy_file(tmp_path / "b.pt", 2)
+    out = tmp_path / "soup.pt"
+    result = subprocess.run([sys.executable, script, str(out), str(first), str(second)],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    soup, a, b = (load_policy(path).state_dict() for path in (out, first, second))
+    for name in a:
+        assert torch.allclose(soup[name], 0.5 * (a[name] + b[name]), atol=1e-7)
+    assert any(not torch.equal(soup[name], a[name]) for name in a)  # not a copy of the first
+    wider = _policy_file(tmp_path / "wide.pt", 3, hidden=64)
+    refused = subprocess.run([sys.executable, script, str(tmp_path / "bad.pt"), str(first), str(wider)],
+                             capture_output=True, text=True, timeout=120)
+    assert refused.returncode != 0
+    assert "different networks" in refused.stderr
+    assert not (tmp_path / "bad.pt").exists()
