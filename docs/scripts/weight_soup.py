@@ -34,7 +34,7 @@ def soup(checkpoints: list[str]) -> dict:
     averaged = {name: torch.stack([state[name].double() for state in states]).mean(0).to(tensor.dtype)
                 for name, tensor in states[0].items()}
     first = torch.load(Path(checkpoints[0]), weights_only=False, map_location="cpu")
-    out = {"policy": averaged, "policy_config": dict(first["policy_config"]), "version": None, "agent_steps": None,
+    out = {"policy": averaged, "policy_config": vars(policies[0].config), "version": None, "agent_steps": None,
            "note": "uniform weight average of " + ", ".join(checkpoints)}
     if "views" in first:
         out["views"] = first["views"]
