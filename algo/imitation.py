@@ -65,10 +65,13 @@ class Episode:
     rewards: list[tuple[float, float]]  # (r_acc, r_sa) per step
     # per step, |student's acceleration mean - teacher's label| (normalised units) when measured; empty: not
     errors: list[float] = field(default_factory=list)
+    # per step, whether the teacher's label is its braking for a car in its way (ScriptedDriver.blocker_bound);
+    # empty: not recorded (all False)
+    blocker: list[bool] = field(default_factory=list)
 
     @classmethod
     def empty(cls) -> "Episode":
-        return cls([], [], [], [], [])
+        return cls([], [], [], [], [], [])
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -98,6 +101,7 @@ class DemonstrationBuffer:
         self.frames = np.zeros((capacity, *FRAME_SHAPE), dtype=np.uint8)
         self.scalars = np.zeros((capacity, SCALARS), dtype=np.float32)
         self.targets = np.zeros((capacity, 2), dtype=np.float32)
+        self.blocker = np.zeros(capacity, dtype=bool)  # the label is the teacher's braking for a blocker
         self.returns = np.zeros((capacity, 2), dtype=np.float32)
         self.value_known = np.zeros(capacity, dtype=bool)
         self.episode_start = np.zeros(capacity, dtype=np.int64)  # absolute index of the episode's first step
@@ -108,7 +112,7 @@ class DemonstrationBuffer:
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.frames, self.scalars, self.targets, self.returns,
+        return sum(a.nbytes for a in (self.frames, self.scalars, self.targets, self.blocker, self.returns,
                                       self.value_known, self.episode_start, self.priorities))
 
     def add(self, episode: Episode, terminal: bool) -> None:
@@ -118,10 +122,13 @@ class DemonstrationBuffer:
         if n > self.capacity:  # keep the newest steps; their history reaches back at most 3 of them
             episode = Episode(episode.frames[-self.capacity:], episode.scalars[-self.capacity:],
                               episode.targets[-self.capacity:], episode.rewards[-self.capacity:],
-                              episode.errors[-self.capacity:])
+                              episode.errors[-self.capacity:], episode.blocker[-self.capacity:])
             n = self.capacity
         if episode.errors and len(episode.errors) != n:
             raise ValueError(f"an episode of {n} steps with {len(episode.errors)} errors: one per step, or none")
+        if episode.blocker and len(episode.blocker) != n:
+            raise ValueError(f"an episode of {n} steps with {len(episode.blocker)} blocker flags: one per step, "
+                             "or none")
         rows = np.arange(self.added, self.added + n) % self.capacity
         if self.priority_exponent > 0:
             if episode.errors:
@@ -131,6 +138,7 @@ class DemonstrationBuffer:
         self.frames[rows] = np.stack(episode.frames)
         self.scalars[rows] = np.stack(episode.scalars)
         self.targets[rows] = np.stack(episode.targets)
+        self.blocker[rows] = np.asarray(episode.blocker, dtype=bool) if episode.blocker else False
         if terminal:
             self.returns[rows] = discounted_returns(np.asarray(episode.rewards, dtype=np.float64), self.gamma)
         self.value_known[rows] = terminal
@@ -174,7 +182,7 @@ class DemonstrationBuffer:
     def batch(self, indices: np.ndarray) -> dict[str, np.ndarray]:
         views, scalars = self.observations(indices)
         rows = indices % self.capacity
-        return {"views": views, "scalars": scalars, "targets": self.targets[rows],
+        return {"views": views, "scalars": scalars, "targets": self.targets[rows], "blocker": self.blocker[rows],
                 "returns": self.returns[rows], "value_known": self.value_known[rows]}
 
 
@@ -183,13 +191,17 @@ BRAKE_LABEL = -0.5
 
 
 def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: float,
-                   brake_weight: float = 1.0, return_errors: bool = False):
+                   brake_weight: float = 1.0, return_errors: bool = False, blocker_weight: float = 1.0):
     """Mean squared error of both means against the teacher's actions (normalised units), plus
     ``value_coef`` times that of both values against the discounted returns where they are known.
 
     ``brake_weight`` > 1 counts each sample whose acceleration label is a hard braking decision
     (``BRAKE_LABEL``) that many times in the acceleration error's weighted mean: those samples are
-    few (7% of car-steps on hard) and decide the crashes.
+    few (7% of car-steps on hard) and decide the crashes. ``blocker_weight`` multiplies the weight
+    of each sample whose label is the teacher's braking for a car standing in its way
+    (``batch["blocker"]``; a batch without that key has none): in the hard student's crossing
+    crashes the car with priority did not brake for the car already in their zone (docs/training.md,
+    session 21).
 
     Returns the loss and its parts as floats; with ``return_errors`` also each sample's
     |mu_acc - label| [B] (normalised units), the priorities of prioritized sampling."""
@@ -199,6 +211,8 @@ def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: flo
     returns = torch.from_numpy(batch["returns"])
     known = torch.from_numpy(batch["value_known"]).float()
     weights = torch.where(targets[:, 0] <= BRAKE_LABEL, brake_weight, 1.0)
+    if blocker_weight != 1.0 and "blocker" in batch:
+        weights = weights * torch.where(torch.from_numpy(batch["blocker"]), blocker_weight, 1.0)
     action_loss_acc = (weights * (mu_acc - targets[:, 0]) ** 2).sum() / weights.sum()
     action_loss_sa = ((mu_sa - targets[:, 1]) ** 2).mean()
     count = known.sum().clamp(min=1.0)

@@ -33,7 +33,8 @@ from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S, SIGHTS
 PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
                     "action_loss_sa", "value_loss_acc", "value_loss_sa", "student_episodes",
                     "student_reach_rate", "teacher_episodes", "teacher_reach_rate",
-                    "brake_label_share")  # of the samples trained on, the share the teacher brakes hard in
+                    "brake_label_share",  # of the samples trained on, the share the teacher brakes hard in
+                    "blocker_label_share")  # ... and the share it brakes for a car in its way in
 ROLLING_EPISODES = 200  # reach rates are over each driver's last this many finished episodes
 
 
@@ -65,6 +66,9 @@ class PretrainConfig:
     teacher_blocker_patience_s: float = BLOCKER_PATIENCE_S
     teacher_half_life: float = 20_000.0  # samples after which the teacher drives half the new episodes
     brake_weight: float = 1.0  # weight of the teacher's hard-braking labels in the action loss (imitation_loss)
+    # a further factor on the weight of the labels where the teacher brakes for a car in its way (needs
+    # teacher_brake_for_blockers)
+    blocker_weight: float = 1.0
     # draw training samples with probability ~ (student's acceleration error + floor) ** this; 0: uniformly
     # (algo.imitation's prioritized sampling)
     priority_exponent: float = 0.0
@@ -117,6 +121,11 @@ class Pretrainer:
             raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
         if not config.brake_weight > 0:
             raise ValueError(f"brake_weight must be > 0, got {config.brake_weight}")
+        if not 0.0 < config.blocker_weight < float("inf"):
+            raise ValueError(f"blocker_weight must be > 0, got {config.blocker_weight}")
+        if config.blocker_weight != 1.0 and not config.teacher_brake_for_blockers:
+            raise ValueError("blocker_weight weighs the teacher's braking for blockers: it needs "
+                             "teacher_brake_for_blockers")
         if not 0.0 <= config.priority_exponent < float("inf"):
             raise ValueError(f"priority_exponent must be >= 0 (0: uniform), got {config.priority_exponent}")
         if config.average_half_life is not None and not 0.0 < config.average_half_life < float("inf"):
@@ -189,6 +198,7 @@ class Pretrainer:
                 episode.frames.append(frames[k].copy())
                 episode.scalars.append(result.scalars[slot].copy())
                 episode.targets.append(targets[k])
+                episode.blocker.append(bool(self.teacher.blocker_bound[slot]))
                 if errors is not None:
                     episode.errors.append(float(errors[k]))
             self.result = result = sim.step(actions)
@@ -211,9 +221,11 @@ class Pretrainer:
             indices = self.buffer.sample_indices(self.config.batch_size, self.rng)
             batch = self.buffer.batch(indices)
             loss, metrics, errors = imitation_loss(self.policy, batch, self.config.value_coef,
-                                                   self.config.brake_weight, return_errors=True)
+                                                   self.config.brake_weight, return_errors=True,
+                                                   blocker_weight=self.config.blocker_weight)
             self.buffer.update_priorities(indices, errors)
             metrics["brake_label_share"] = float((batch["targets"][:, 0] <= BRAKE_LABEL).mean())
+            metrics["blocker_label_share"] = float(batch["blocker"].mean())
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(self.policy.parameters(), 40.0)

@@ -34,7 +34,9 @@ With ``brake_for_blockers`` it also stops before a conflict zone that a car in s
 whatever the priority: a car standing in the junction is an obstacle, even for a car with the
 right of way (docs/scripts/crash_kinds.py: most crashes of the view-limited driver on easy were a
 car with priority running into one that had entered their conflict zone first). After standing
-``BLOCKER_PATIENCE_S`` it goes anyway: three cars can each stand in the zone of the next.
+``BLOCKER_PATIENCE_S`` it goes anyway: three cars can each stand in the zone of the next. After
+each ``act()``, ``blocker_bound`` says which cars' acceleration is that braking (``crossway
+pretrain --blocker-weight`` counts those labels more).
 
 With ``wait_outside_zones`` it never plans to stand inside a conflict zone: when the point where it
 would stop (for a car with priority, or for a blocker) leaves its body inside the zone of another
@@ -186,6 +188,9 @@ class ScriptedDriver:
         self.speed_fraction = speed_fraction  # cruise at this fraction of the target speed
         self.yield_to_priority = yield_to_priority
         self._standing_s = np.zeros(sim.num_slots)
+        # per slot, after each act(): its acceleration is the braking for a car in its way
+        # (brake_for_blockers), the label ``crossway pretrain --blocker-weight`` counts more
+        self.blocker_bound = np.zeros(sim.num_slots, dtype=bool)
         lanes = sim.intersection.lanes
         self._entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])  # per route
         self._entry_branch = np.array([lanes[e].branch for e in self._entry_lane])  # per route
@@ -199,6 +204,8 @@ class ScriptedDriver:
     def act(self) -> np.ndarray:
         sim = self.sim
         actions = np.zeros((sim.num_slots, 2))
+        self.blocker_bound[:] = False
+        blocker_braking = np.full(sim.num_slots, math.inf)  # [m/s^2]; inf: nothing in its way
         idx = np.flatnonzero(sim.present)  # every car, traffic included, is someone to yield to
         learners = sim.learners_present
         self._standing_s[~learners] = 0.0
@@ -267,6 +274,7 @@ class ScriptedDriver:
                     waits_for[slot].add(other)  # not braking yet, but it will
             if self.brake_for_blockers and self._standing_s[slot] < self.blocker_patience_s:
                 braking, occupants = self._blocker_braking(slot, idx, sight[a], speed, s_front)
+                blocker_braking[slot] = braking
                 acceleration = min(acceleration, braking)
                 waits_for[slot].update(occupants)
             actions[slot] = (acceleration, steering)
@@ -279,6 +287,8 @@ class ScriptedDriver:
                 for other, braking in brakings:
                     if slot not in _reachable(waits_for, other):
                         actions[slot, 0] = min(actions[slot, 0], braking)
+        # the blocker's braking decides the action (ties with another reason to brake count too)
+        self.blocker_bound[:] = np.isfinite(blocker_braking) & (blocker_braking <= actions[:, 0])
         standing = learners & (sim.speed[: sim.num_slots] < STANDING_MPS)
         self._standing_s[standing] += DT
         self._standing_s[~standing] = 0.0

@@ -325,17 +325,23 @@ def test_a_teacher_that_brakes_for_blockers_stops_for_a_car_standing_in_its_zone
     south = place(sim, "south_0", "straight", s=inside_s, sign=2, speed=0.0)
     east = place(sim, "east_0", "straight", s=table.zone_start[east_route, south_route] - 20.0, sign=0, speed=8.0)
     assert sim.priorities(np.array([south, east]))[0, 1]  # east over south
-    plain = ScriptedDriver(sim).act()[east, 0]
+    plain_driver = ScriptedDriver(sim)
+    plain = plain_driver.act()[east, 0]
     guarded = ScriptedDriver(sim, brake_for_blockers=True)
     assert plain > -2.0  # it has the right of way: it keeps its speed
+    assert not plain_driver.blocker_bound.any()  # a driver that does not brake for blockers never says it does
     gap_m = table.zone_start[east_route, south_route] - STOP_MARGIN_M - (sim.s[east] + 0.5 * VEHICLE_LENGTH)
     assert guarded.act()[east, 0] == pytest.approx(-8.0 ** 2 / (2.0 * gap_m))  # a stop at its stop point
+    # the label is the braking for the blocker (crossway pretrain --blocker-weight); the south car, standing
+    # in the zone it must clear, brakes for nobody
+    assert guarded.blocker_bound[east] and not guarded.blocker_bound[south]
     # the same with the sight of the views (the south car is 20 m ahead and a few metres aside)
     assert scripted_driver(sim, DriverOptions(sight="view", brake_for_blockers=True)).act()[east, 0] < -2.0
     # once past the zone's start it clears it rather than stopping inside
     sim.s[south] = table.zone_end[south_route, east_route] + 0.5 * VEHICLE_LENGTH + 1.0  # the south car left it
     sim.x[south], sim.y[south] = sim.intersection.routes[south_route].path.position(sim.s[south], 0.0)
-    assert ScriptedDriver(sim, brake_for_blockers=True).act()[east, 0] == pytest.approx(plain)
+    assert guarded.act()[east, 0] == pytest.approx(plain)
+    assert not guarded.blocker_bound.any()  # the flag is the last act()'s, not a memory of the one before
     # back in the zone, with the east car standing before it: it waits BLOCKER_PATIENCE_S, then goes
     sim.s[south] = inside_s
     sim.x[south], sim.y[south] = sim.intersection.routes[south_route].path.position(inside_s, 0.0)

@@ -75,6 +75,11 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--brake-weight", type=float, default=1.0, metavar="W",
                         help="count each sample the teacher brakes hard in (-1.5 m/s2 or more) W times in the "
                              "acceleration loss: such samples are few (about 7%% on hard) and decide the crashes")
+    parser.add_argument("--blocker-weight", type=float, default=1.0, metavar="W",
+                        help="with --teacher-brake-for-blockers: multiply by W the weight of each sample whose "
+                             "label is the teacher braking for a car standing in its way (on top of --brake-weight): "
+                             "in the hard student's crossing crashes the car with priority ran into a car already "
+                             "in their zone (docs/training.md). Default 1")
     parser.add_argument("--priority-exponent", type=float, default=0.0, metavar="ALPHA",
                         help="draw training samples with probability proportional to (the student's acceleration "
                              "error + 0.15 m/s2) ** ALPHA, measured when it drove past them and each time they are "
@@ -134,6 +139,11 @@ def run(args) -> int:
         raise ValueError(f"--teacher-half-life must be > 0 samples, got {args.teacher_half_life}")
     if not args.brake_weight > 0:
         raise ValueError(f"--brake-weight must be > 0, got {args.brake_weight}")
+    if not 0.0 < args.blocker_weight < float("inf"):
+        raise ValueError(f"--blocker-weight must be > 0, got {args.blocker_weight}")
+    if args.blocker_weight != 1.0 and not args.teacher_brake_for_blockers:
+        raise ValueError("--blocker-weight weighs the teacher's braking for blockers: it goes with "
+                         "--teacher-brake-for-blockers")
     if not 0.0 <= args.priority_exponent < float("inf"):
         raise ValueError(f"--priority-exponent must be >= 0 (0: uniform sampling), got {args.priority_exponent}")
     if args.teacher_approach_speed is not None and not 0.0 < args.teacher_approach_speed < float("inf"):
@@ -175,7 +185,7 @@ def run(args) -> int:
         teacher_break_wait_cycles=args.teacher_break_wait_cycles,
         teacher_patience_s=args.teacher_patience, teacher_blocker_patience_s=args.teacher_blocker_patience,
         teacher_half_life=args.teacher_half_life,
-        brake_weight=args.brake_weight, priority_exponent=args.priority_exponent,
+        brake_weight=args.brake_weight, blocker_weight=args.blocker_weight, priority_exponent=args.priority_exponent,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
         torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network,
         standing_input=args.standing_input)
