@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -169,3 +170,20 @@ def test_weight_soup_writes_the_mean_of_the_weights_and_refuses_different_networ
     assert refused.returncode != 0
     assert "different networks" in refused.stderr
     assert not (tmp_path / "bad.pt").exists()
+
+
+def test_blocker_labels_sorts_every_car_step_and_reports_every_crash():
+    result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/blocker_labels.py"),
+                             "models/hard-student-untangle2.pt", "--steps", "200", "--delay-max", "5"],
+                            capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    labels = report["labels"]
+    assert set(labels) == {"teacher brakes for a blocker", "teacher brakes hard for another reason", "other steps"}
+    assert sum(k["share"] for k in labels.values()) == pytest.approx(1.0, abs=1e-3)
+    assert all(k["car_steps"] > 0 for k in labels.values())  # 200 steps of hard traffic have each kind
+    # the two braking kinds brake, on average, and harder than the other steps
+    assert labels["teacher brakes hard for another reason"]["teacher_mean_mps2"] <= -1.5
+    assert labels["teacher brakes for a blocker"]["teacher_mean_mps2"] < labels["other steps"]["teacher_mean_mps2"]
+    assert len(report["crashes"]) == report["end_reasons"].get("crash", 0)
+    assert report["teacher"]["scripted_brake_for_blockers"] is True
