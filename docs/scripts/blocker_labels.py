@@ -27,7 +27,10 @@ import json
 
 import numpy as np
 
-HARD_BRAKE_MPS2 = -1.5  # algo.imitation.BRAKE_LABEL in m/s^2
+from algo.imitation import BRAKE_LABEL
+from algo.policy import ACTION_SCALE
+
+HARD_BRAKE_MPS2 = BRAKE_LABEL * float(ACTION_SCALE[0])  # the imitation loss's hard-braking label [m/s^2]
 LAST_STEPS = 30  # the crashed car's last steps looked at (0.1 s each)
 
 
@@ -44,7 +47,7 @@ def main() -> None:
 
     import torch
 
-    from algo.policy import ACTION_SCALE, load_policy
+    from algo.policy import load_policy
     from evaluation.policy import PolicyDriver, check_checkpoint
     from simcore.controller import DriverOptions, scripted_driver
     from simcore.simulator import SimConfig, Simulator
