@@ -135,6 +135,56 @@ def widen(policy: Policy, config: PolicyConfig, seed: int = 0) -> Policy:
     return wide
 
 
+def ensemble(policies: list[Policy]) -> Policy:
+    """One network of the paper's shape that computes the mean of ``policies``' outputs before the
+    tanh: mu = tanh(mean_k z_k) where mu_k = tanh(z_k), and v = mean_k v_k.
+
+    The members sit side by side in every layer (sizes summed) with zero weights between them, so a
+    member's units read only its own units below: conv1 channels, conv2 channels and hidden units
+    are each member's in turn, and the two output layers take each member's weights divided by the
+    member count. A network with the standing-time input results when any member reads it; the
+    members that do not read it get zero weights from it. Evaluate it as any checkpoint; it costs
+    about as much as all its members together (more in the dense layers, whose zero blocks are
+    still multiplied). An output ensemble, not a weight average (docs/scripts/weight_soup.py).
+    """
+    if not policies:
+        raise ValueError("an ensemble needs at least one network")
+    configs = [policy.config for policy in policies]
+    config = PolicyConfig(conv1_channels=sum(c.conv1_channels for c in configs),
+                          conv2_channels=sum(c.conv2_channels for c in configs),
+                          hidden=sum(c.hidden for c in configs),
+                          standing_input=any(c.standing_input for c in configs))
+    joined = Policy(config)
+    features = CONV2_CELLS * config.conv2_channels  # the hidden layer's inputs from the views; the scalars follow
+    share = 1.0 / len(policies)
+    with torch.no_grad():
+        for parameter in joined.parameters():
+            parameter.zero_()
+        for head in ("acc", "sa"):
+            new = getattr(joined, head)
+            c1_at = c2_at = h_at = 0  # where the member's units start in each layer
+            for policy in policies:
+                was, sizes = getattr(policy, head), policy.config
+                c1, c2, h = sizes.conv1_channels, sizes.conv2_channels, sizes.hidden
+                new.conv1.weight[c1_at:c1_at + c1] = was.conv1.weight
+                new.conv1.bias[c1_at:c1_at + c1] = was.conv1.bias
+                new.conv2.weight[c2_at:c2_at + c2, c1_at:c1_at + c1] = was.conv2.weight
+                new.conv2.bias[c2_at:c2_at + c2] = was.conv2.bias
+                # the flattened conv2 output is channel-major: a member's channels are one block of it
+                new.hidden.weight[h_at:h_at + h, CONV2_CELLS * c2_at:CONV2_CELLS * (c2_at + c2)] = \
+                    was.hidden.weight[:, :CONV2_CELLS * c2]
+                new.hidden.weight[h_at:h_at + h, features:features + sizes.scalar_inputs] = \
+                    was.hidden.weight[:, CONV2_CELLS * c2:]
+                new.hidden.bias[h_at:h_at + h] = was.hidden.bias
+                for out in ("mu", "value"):
+                    layer, old_layer = getattr(new, out), getattr(was, out)
+                    layer.weight[:, h_at:h_at + h] = share * old_layer.weight
+                    layer.bias.add_(share * old_layer.bias)
+                c1_at, c2_at, h_at = c1_at + c1, c2_at + c2, h_at + h
+    joined.eval()
+    return joined
+
+
 def preprocess(views: np.ndarray, scalars: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
     """uint8 views [B, 16, 84, 84] and scalars [B, 2 or 3] (speed, target speed [m/s], standing
     time [s]) to network inputs: views in [0, 1], scalars as ``scale_scalars``."""

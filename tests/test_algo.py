@@ -354,6 +354,45 @@ def test_widen_refuses_a_smaller_network():
         widen(Policy(PolicyConfig(standing_input=True)), PolicyConfig())
 
 
+@pytest.mark.parametrize("members", [[(16, 16, 128, False)] * 2,
+                                     [(16, 16, 128, False), (8, 12, 40, True), (4, 4, 16, False)]])
+def test_an_ensemble_computes_the_mean_of_its_members_outputs_before_the_tanh(members):
+    from algo.policy import Policy, PolicyConfig, ensemble, preprocess
+
+    torch.manual_seed(0)
+    policies = []
+    for sizes in members:
+        policy = Policy(PolicyConfig(*sizes))
+        with torch.no_grad():  # weights away from the initial ones, mu's and biases included
+            for p in policy.parameters():
+                p.add_(0.05 * torch.randn_like(p))
+        policies.append(policy.eval())
+    joined = ensemble(policies)
+    assert joined.config.hidden == sum(sizes[2] for sizes in members)
+    assert joined.config.standing_input == any(sizes[3] for sizes in members)
+    rng = np.random.default_rng(2)
+    views, scalars = preprocess(rng.integers(0, 256, (6, 16, 84, 84), dtype=np.uint8),
+                                np.array([[float(i), 8.0, 3.0 * i] for i in range(6)]))
+    with torch.no_grad():
+        outputs = [policy(views, scalars) for policy in policies]
+        mu_acc, v_acc, mu_sa, v_sa = joined(views, scalars)
+    # the value heads are linear: their mean exactly; the means are tanh of the mean pre-activation
+    torch.testing.assert_close(v_acc, torch.stack([o[1] for o in outputs]).mean(0), atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(v_sa, torch.stack([o[3] for o in outputs]).mean(0), atol=1e-5, rtol=1e-5)
+    for joined_mu, index in ((mu_acc, 0), (mu_sa, 2)):
+        pre = torch.stack([torch.atanh(o[index].double()) for o in outputs]).mean(0)
+        torch.testing.assert_close(joined_mu.double(), torch.tanh(pre), atol=1e-5, rtol=1e-5)
+    # not a copy of one member
+    assert not torch.allclose(mu_acc, outputs[0][0], atol=1e-4)
+
+
+def test_an_ensemble_of_nothing_is_refused():
+    from algo.policy import ensemble
+
+    with pytest.raises(ValueError, match="at least one"):
+        ensemble([])
+
+
 @pytest.mark.parametrize("sizes", [(16, 16, 128), (16, 32, 256)])
 def test_the_standing_time_input_starts_unread_and_then_learns(sizes):
     """widen to standing_input: the same function whatever the standing time, until training moves

@@ -172,6 +172,35 @@ def test_weight_soup_writes_the_mean_of_the_weights_and_refuses_different_networ
     assert not (tmp_path / "bad.pt").exists()
 
 
+def test_ensemble_writes_one_network_driving_by_its_members_mean_and_refuses_other_views(tmp_path):
+    import numpy as np
+    import torch
+
+    from algo.policy import load_policy, preprocess
+
+    script = str(ROOT / "docs/scripts/ensemble.py")
+    first, second = _policy_file(tmp_path / "a.pt", 1), _policy_file(tmp_path / "b.pt", 2, hidden=64)
+    out = tmp_path / "joined.pt"
+    result = subprocess.run([sys.executable, script, str(out), str(first), str(second)],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    joined, a, b = (load_policy(path) for path in (out, first, second))
+    assert (joined.config.conv1_channels, joined.config.hidden) == (32, 192)
+    views, scalars = preprocess(np.random.default_rng(3).integers(0, 256, (4, 16, 84, 84), dtype=np.uint8),
+                                np.array([[float(i), 8.0] for i in range(4)]))
+    with torch.no_grad():
+        v_joined, v_a, v_b = (policy(views, scalars)[1] for policy in (joined, a, b))
+    torch.testing.assert_close(v_joined, 0.5 * (v_a + v_b), atol=1e-5, rtol=1e-5)
+    other_views = tmp_path / "wide-views.pt"
+    state = torch.load(first, weights_only=False)
+    state["views"] = {"extent_m": 70.0, "shift_m": 0.0}
+    torch.save(state, other_views)
+    refused = subprocess.run([sys.executable, script, str(tmp_path / "bad.pt"), str(first), str(other_views)],
+                             capture_output=True, text=True, timeout=120)
+    assert refused.returncode != 0
+    assert "different view squares" in refused.stderr
+    assert not (tmp_path / "bad.pt").exists()
+
 def test_blocker_labels_sorts_every_car_step_and_reports_every_crash():
     result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/blocker_labels.py"),
                              "models/hard-student-untangle2.pt", "--steps", "200", "--delay-max", "5"],
