@@ -17,6 +17,8 @@ one forward and backward pass costs about 0.6-0.8 ms per sample on one core as t
 
 from __future__ import annotations
 
+import collections
+import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -183,6 +185,69 @@ def ensemble(policies: list[Policy]) -> Policy:
                 c1_at, c2_at, h_at = c1_at + c1, c2_at + c2, h_at + h
     joined.eval()
     return joined
+
+
+def ensemble_members(policy: Policy) -> int:
+    """How many equal members ``policy`` splits into: the largest K such that, in both heads, its
+    conv1 channels, conv2 channels and hidden units fall into K equal blocks in turn and no unit
+    reads a unit of another block (the layout ``ensemble`` writes); 1 when no split exists.
+
+    Any such network is the sum of its K blocks before the output tanh, so it can run as K weight
+    sets at once (``member_weights``, ``evaluation.policy.PolicyDriver``) instead of multiplying
+    the zero blocks of its dense layers.
+    """
+    config = policy.config
+    sizes = (config.conv1_channels, config.conv2_channels, config.hidden)
+    common = math.gcd(*sizes)
+    for members in range(common, 1, -1):
+        if common % members == 0 and _splits(policy, members):
+            return members
+    return 1
+
+
+def _splits(policy: Policy, members: int) -> bool:
+    config = policy.config
+    c1, c2, h = (size // members for size in (config.conv1_channels, config.conv2_channels, config.hidden))
+    features = CONV2_CELLS * config.conv2_channels
+    for head in ("acc", "sa"):
+        module = getattr(policy, head)
+        conv2 = module.conv2.weight.detach().abs().sum(dim=(2, 3))  # [C2, C1]
+        hidden = module.hidden.weight.detach()[:, :features].abs().reshape(config.hidden, config.conv2_channels,
+                                                                            CONV2_CELLS).sum(2)  # [H, C2]
+        inside_conv2 = torch.block_diag(*[torch.ones(c2, c1)] * members).bool()
+        inside_hidden = torch.block_diag(*[torch.ones(h, c2)] * members).bool()
+        if conv2[~inside_conv2].any() or hidden[~inside_hidden].any():
+            return False
+    return True
+
+
+def member_weights(policy: Policy, members: int) -> dict[str, torch.Tensor]:
+    """``policy``'s weights as ``members`` weight sets in ``Policy``'s names, each with a leading
+    dimension ``members`` (as ``algo.stacked.after_conv1`` takes them): block k of every layer,
+    with the output layers' biases shared out equally, so that the members' outputs before the
+    tanh sum to the network's. ``members`` must be a split ``ensemble_members`` found."""
+    config = policy.config
+    c1, c2, h = (size // members for size in (config.conv1_channels, config.conv2_channels, config.hidden))
+    features = CONV2_CELLS * config.conv2_channels
+    sets: dict[str, list[torch.Tensor]] = collections.defaultdict(list)
+    with torch.no_grad():
+        for k in range(members):
+            one1, one2, oneh = slice(k * c1, (k + 1) * c1), slice(k * c2, (k + 1) * c2), slice(k * h, (k + 1) * h)
+            for head in ("acc", "sa"):
+                module = getattr(policy, head)
+                sets[f"{head}.conv1.weight"].append(module.conv1.weight[one1])
+                sets[f"{head}.conv1.bias"].append(module.conv1.bias[one1])
+                sets[f"{head}.conv2.weight"].append(module.conv2.weight[one2, one1])
+                sets[f"{head}.conv2.bias"].append(module.conv2.bias[one2])
+                hidden = module.hidden.weight[oneh]
+                sets[f"{head}.hidden.weight"].append(torch.cat(
+                    [hidden[:, CONV2_CELLS * k * c2:CONV2_CELLS * (k + 1) * c2], hidden[:, features:]], dim=1))
+                sets[f"{head}.hidden.bias"].append(module.hidden.bias[oneh])
+                for out in ("mu", "value"):
+                    layer = getattr(module, out)
+                    sets[f"{head}.{out}.weight"].append(layer.weight[:, oneh])
+                    sets[f"{head}.{out}.bias"].append(layer.bias / members)
+    return {name: torch.stack(weights).contiguous() for name, weights in sets.items()}
 
 
 def preprocess(views: np.ndarray, scalars: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:

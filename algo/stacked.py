@@ -88,14 +88,15 @@ def conv1_gradients(patch_rows: torch.Tensor, grad_pre: torch.Tensor,
     return grads
 
 
-def after_conv1(pre1: torch.Tensor, scalars: torch.Tensor,
-                params: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+def after_conv1(pre1: torch.Tensor, scalars: torch.Tensor, params: dict[str, torch.Tensor],
+                squash: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
     """The rest of both sub-modules from the first layer's pre-activation, for B weight sets.
 
     ``pre1`` [B, N, 441, 2*C1] (acc channels first), ``scalars`` [B, N, >= 2] as the simulator gives
     them (m/s, s; the network reads as many as its hidden layer takes), ``params``
     with leading dimension B. Returns Gaussian means and values, each [B, N, 2] (acc, sa): the
-    same function as ``algo.policy.Policy`` after its first convolutions.
+    same function as ``algo.policy.Policy`` after its first convolutions; with ``squash`` False
+    the means before their tanh.
     """
     b, n = pre1.shape[:2]
     channels = pre1.shape[-1]  # 2*C1
@@ -112,7 +113,8 @@ def after_conv1(pre1: torch.Tensor, scalars: torch.Tensor,
     for h, head in enumerate(HEADS):
         x3 = torch.cat([h2[:, :, h].transpose(0, 1), inputs], dim=2)  # [B, N, C2*100 + 2 or 3]
         h3 = torch.relu(_linear(x3, params[f"{head}.hidden.weight"], params[f"{head}.hidden.bias"]))
-        mus.append(torch.tanh(_linear(h3, params[f"{head}.mu.weight"], params[f"{head}.mu.bias"])))
+        mu = _linear(h3, params[f"{head}.mu.weight"], params[f"{head}.mu.bias"])
+        mus.append(torch.tanh(mu) if squash else mu)
         values.append(_linear(h3, params[f"{head}.value.weight"], params[f"{head}.value.bias"]))
     return torch.cat(mus, dim=2), torch.cat(values, dim=2)
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from algo.policy import ACTION_SCALE, Policy, load_policy, require_views
+from algo.policy import ACTION_SCALE, Policy, ensemble_members, load_policy, member_weights, require_views
 from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
 
 
@@ -42,7 +42,10 @@ class PolicyDriver:
     """Acts for every learner slot of a ``Simulator`` from the newest ``StepResult``.
 
     The network runs in the matrix form of ``algo.stacked`` (the same function as ``Policy``,
-    about twice as fast on a CPU as its convolution modules for these layer shapes).
+    about twice as fast on a CPU as its convolution modules for these layer shapes). A network
+    that splits into K equal blocks (an output ensemble, ``algo.policy.ensemble``) runs as K
+    weight sets at once, whose outputs before the tanh add up: the same function without the
+    dense layers' zero blocks.
     """
 
     def __init__(self, sim, policy: Policy, sigma: float = 0.0, seed: int | None = None):
@@ -50,17 +53,27 @@ class PolicyDriver:
         self.policy = policy
         self.sigma = sigma
         self._rng = np.random.default_rng(seed)
-        weights = {name: p.detach() for name, p in policy.named_parameters()}
-        self._first_layer = first_layer_matrix(weights)
-        self._params = {name: w.unsqueeze(0) for name, w in weights.items()}  # one weight set
+        self.members = ensemble_members(policy)
+        self._params = member_weights(policy, self.members)  # K weight sets (K = 1: the network itself)
+        # one first-layer matrix for every member and head, columns ordered member by member
+        # (acc channels, then sa channels, as after_conv1 takes each member's)
+        matrix, bias = first_layer_matrix({name: w.reshape(-1, *w.shape[2:]) for name, w in self._params.items()
+                                           if "conv1" in name})
+        channels = self._params["acc.conv1.weight"].shape[1]
+        order = torch.arange(2 * self.members * channels).reshape(2, self.members, channels).transpose(0, 1).flatten()
+        self._first_layer = (matrix[:, order].contiguous(), bias[order].contiguous())
 
     def heads(self, views: np.ndarray, scalars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Means and values [B, 2] (acc, sa) for uint8 views [B, 16, 84, 84] and speeds [B, 2] m/s."""
+        k = self.members
         with torch.no_grad():
             pre1 = conv1(patches(torch.from_numpy(np.ascontiguousarray(views))), *self._first_layer)
+            n = pre1.shape[0]
+            pre1 = pre1.reshape(n, pre1.shape[1], k, -1).permute(2, 0, 1, 3)  # [K, N, 441, 2*C1]
             speeds = torch.from_numpy(np.ascontiguousarray(scalars, dtype=np.float32))
-            mu, values = after_conv1(pre1[None], speeds[None], self._params)
-        return mu[0].numpy().astype(np.float64), values[0].numpy().astype(np.float64)
+            pre_mu, values = after_conv1(pre1, speeds[None].expand(k, *speeds.shape), self._params, squash=False)
+            mu = torch.tanh(pre_mu.sum(0))
+        return mu.numpy().astype(np.float64), values.sum(0).numpy().astype(np.float64)
 
     def act(self, result) -> np.ndarray:
         """Actions [slots, 2] (m/s^2, rad) for the cars on the road; zeros elsewhere."""

@@ -264,6 +264,50 @@ def test_policy_driver_acts_as_the_policy_modules():
     assert not actions[np.setdiff1d(np.arange(sim.num_slots), active)].any()
 
 
+
+def test_policy_driver_runs_an_ensemble_as_its_members_with_the_same_outputs():
+    """An output ensemble splits into its members (zero blocks skipped) and drives exactly as the
+    wide network's modules; a widened network, whose old units read new ones' zero, does not split
+    unless its blocks are really apart, and a trained dense one never does."""
+    import torch
+
+    from algo.policy import Policy, PolicyConfig, ensemble, ensemble_members, preprocess, widen
+    from evaluation.policy import PolicyDriver
+    from simcore.simulator import SimConfig, Simulator
+
+    torch.manual_seed(5)
+    members = []
+    for standing in (False, True, False):
+        member = Policy(PolicyConfig(standing_input=standing))
+        with torch.no_grad():
+            for p in member.parameters():
+                p.add_(0.05 * torch.randn_like(p))
+        members.append(member)
+    joined = ensemble(members)
+    assert ensemble_members(joined) == 3
+    assert ensemble_members(members[0]) == 1
+    wide = widen(members[0], PolicyConfig(32, 32, 256), seed=1)
+    assert ensemble_members(wide) == 1  # new units read the old ones: not apart
+    with torch.no_grad():
+        joined.sa.hidden.weight[0, -200] = 0.1  # one weight across two blocks (unit 0 reads member 3)
+    assert ensemble_members(joined) == 1
+    with torch.no_grad():
+        joined.sa.hidden.weight[0, -200] = 0.0
+    sim = Simulator("medium", SimConfig(delay_max_s=0.0), seed=2)
+    result = sim.reset()
+    driver = PolicyDriver(sim, joined)
+    assert driver.members == 3
+    for _ in range(5):
+        result = sim.step(driver.act(result))
+    active = np.flatnonzero(sim.learners_present)
+    assert len(active) >= 2
+    result.scalars[active, 2] = np.arange(len(active)) * 4.0  # standing times the second member reads
+    means, values = driver.heads(result.views[active], result.scalars[active])
+    with torch.no_grad():
+        mu_acc, v_acc, mu_sa, v_sa = joined(*preprocess(result.views[active], result.scalars[active]))
+    np.testing.assert_allclose(means, np.stack([mu_acc.numpy(), mu_sa.numpy()], 1), atol=1e-5)
+    np.testing.assert_allclose(values, np.stack([v_acc.numpy(), v_sa.numpy()], 1), atol=1e-4)
+
 def test_table1_chunks_of_a_test_are_summed():
     from evaluation.table1 import merge_chunks, summarise
 
