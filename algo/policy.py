@@ -288,7 +288,11 @@ def parameter_shapes(policy: nn.Module) -> dict[str, tuple[int, ...]]:
 
 
 def load_policy(checkpoint: str | Path) -> Policy:
-    """A policy from a learner checkpoint; a clear error if the file or network does not fit."""
+    """A policy from a learner checkpoint; a clear error if the file or network does not fit.
+
+    A file that holds ``members`` (an output ensemble as docs/scripts/ensemble.py writes it, each
+    member's weights and sizes) gives the one network ``ensemble`` joins them into: the file keeps
+    only the members, not the joined network's zero blocks."""
     path = Path(checkpoint)
     if not path.is_file():
         raise ValueError(f"no checkpoint file {str(path)!r}")
@@ -296,17 +300,27 @@ def load_policy(checkpoint: str | Path) -> Policy:
         state = torch.load(path, weights_only=False, map_location="cpu")
     except Exception as error:  # torch raises several types for a file that is not a checkpoint
         raise ValueError(f"{path} is not a crossway checkpoint ({type(error).__name__}: {error})") from None
+    if isinstance(state, dict) and "members" in state:
+        members = state["members"]
+        if not isinstance(members, list) or not members:
+            raise ValueError(f"{path}: an ensemble file without members")
+        return ensemble([_policy_from(f"{path} (member {k + 1})", member) for k, member in enumerate(members)])
+    return _policy_from(str(path), state)
+
+
+def _policy_from(source: str, state) -> Policy:
+    """The network of one ``{"policy": weights, "policy_config": sizes}`` entry; ``source`` names it in errors."""
     if not isinstance(state, dict) or "policy" not in state or "policy_config" not in state:
-        raise ValueError(f"{path} is not a crossway learner checkpoint (no policy or policy_config)")
+        raise ValueError(f"{source} is not a crossway learner checkpoint (no policy or policy_config)")
     try:
         config = PolicyConfig(**state["policy_config"])
     except TypeError as error:
-        raise ValueError(f"{path}: its network description does not match this crossway ({error})") from None
+        raise ValueError(f"{source}: its network description does not match this crossway ({error})") from None
     policy = Policy(config)
     try:
         policy.load_state_dict(state["policy"])
     except RuntimeError as error:
-        raise ValueError(f"{path}: its weights do not match the network {config} ({str(error)[:200]})") from None
+        raise ValueError(f"{source}: its weights do not match the network {config} ({str(error)[:200]})") from None
     policy.eval()
     return policy
 

@@ -29,8 +29,10 @@ def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Pa
     policy = load_policy(checkpoint)
     state = torch.load(Path(checkpoint), weights_only=False, map_location="cpu")
     out = Path(out)
-    exported = {"policy": policy.state_dict(), "policy_config": state["policy_config"],
-                "version": state.get("version"), "agent_steps": state.get("agent_steps"),
+    # an ensemble keeps its members (algo.policy.load_policy joins them), not the joined zero blocks
+    weights = ({"members": state["members"]} if "members" in state
+               else {"policy": policy.state_dict(), "policy_config": state["policy_config"]})
+    exported = {**weights, "version": state.get("version"), "agent_steps": state.get("agent_steps"),
                 "run_id": state.get("run_id"), "note": note}
     if "views" in state:  # a file without the record reads as the paper's views (algo.policy.policy_views)
         exported["views"] = state["views"]

@@ -191,6 +191,16 @@ def test_ensemble_writes_one_network_driving_by_its_members_mean_and_refuses_oth
     with torch.no_grad():
         v_joined, v_a, v_b = (policy(views, scalars)[1] for policy in (joined, a, b))
     torch.testing.assert_close(v_joined, 0.5 * (v_a + v_b), atol=1e-5, rtol=1e-5)
+    assert len(torch.load(out, weights_only=False)["members"]) == 2  # the members, not the joined zero blocks
+    third = _policy_file(tmp_path / "c.pt", 3)
+    again = tmp_path / "again.pt"  # an ensemble joins in as its members: each of the three counts a third
+    result = subprocess.run([sys.executable, script, str(again), str(out), str(third)],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert len(torch.load(again, weights_only=False)["members"]) == 3
+    with torch.no_grad():
+        v_again, v_c = load_policy(again)(views, scalars)[1], load_policy(third)(views, scalars)[1]
+    torch.testing.assert_close(v_again, (v_a + v_b + v_c) / 3, atol=1e-5, rtol=1e-5)
     other_views = tmp_path / "wide-views.pt"
     state = torch.load(first, weights_only=False)
     state["views"] = {"extent_m": 70.0, "shift_m": 0.0}

@@ -196,6 +196,32 @@ def test_export_keeps_the_policy_and_evaluates_the_same(tmp_path):
     assert torch.load(small, weights_only=False)["note"] == "unit test"
 
 
+
+def test_an_ensemble_file_loads_as_one_network_exports_as_its_members_and_bad_ones_are_refused(tmp_path):
+    from dataclasses import asdict
+
+    from algo.policy import Policy, PolicyConfig, ensemble
+    from evaluation.policy import load_policy
+
+    torch.manual_seed(3)
+    members = [Policy(PolicyConfig()), Policy(PolicyConfig(hidden=64))]
+    path = tmp_path / "ensemble.pt"
+    torch.save({"members": [{"policy": m.state_dict(), "policy_config": asdict(m.config)} for m in members]}, path)
+    joined = load_policy(path)
+    for (name, a), b in zip(joined.state_dict().items(), ensemble(members).state_dict().values()):
+        assert torch.equal(a, b), name
+    result = crossway("evaluate", "export", "--checkpoint", str(path), "--out", str(tmp_path / "small.pt"))
+    assert result.returncode == 0, result.stderr
+    assert len(torch.load(tmp_path / "small.pt", weights_only=False)["members"]) == 2
+    for (name, a), b in zip(load_policy(tmp_path / "small.pt").state_dict().items(), joined.state_dict().values()):
+        assert torch.equal(a, b), name
+    torch.save({"members": []}, tmp_path / "empty.pt")
+    with pytest.raises(ValueError, match="without members"):
+        load_policy(tmp_path / "empty.pt")
+    torch.save({"members": [{"policy": members[0].state_dict(), "policy_config": {"hidden": 64}}]}, tmp_path / "bad.pt")
+    with pytest.raises(ValueError, match=r"member 1\).*do not match"):
+        load_policy(tmp_path / "bad.pt")
+
 def test_ttc_comparison_reuses_the_sweeps_cells_at_the_chosen_threshold(tmp_path):
     """The sweep and the comparison seed each cell alike, so a TTC cell at the chosen threshold is the
     same episodes in both: the comparison takes it from the sweep instead of driving it again."""

@@ -1,14 +1,16 @@
-"""Join several policies into one network that drives by the mean of their outputs (session 22).
+"""Join several policies into one that drives by the mean of their outputs (session 22).
 
     python docs/scripts/ensemble.py OUT.pt CKPT CKPT [CKPT ...]
 
-Writes one checkpoint whose network holds every member side by side (``algo.policy.ensemble``):
-its acceleration and steering means are tanh of the members' mean pre-activation, its values the
-members' mean. Unlike a weight average (docs/scripts/weight_soup.py) the members need not share a
-start or a size; they must have learnt from the same view square. OUT keeps the first one's views
-record and names its members in its note. Evaluate it as any checkpoint (``crossway evaluate table1
---checkpoint OUT.pt``); it costs about as much as its members together.
-"""
+Writes one checkpoint that holds every member's weights and sizes; every crossway command loads
+it as one network (``algo.policy.load_policy``, ``algo.policy.ensemble``) whose acceleration and
+steering means are tanh of the members' mean pre-activation and whose values are the members'
+mean. Unlike a weight average (docs/scripts/weight_soup.py) the members need not share a start
+or a size; they must have learnt from the same view square. An ensemble among the checkpoints
+joins in as its members (so two ensembles of 3 make one of 6, each member counting once). OUT
+keeps the first one's views record and names the checkpoints in its note. Evaluate it as any
+checkpoint (``crossway evaluate table1 --checkpoint OUT.pt``); ``evaluation.policy.PolicyDriver``
+runs the members side by side, at less than the cost of all of them one after the other."""
 
 from __future__ import annotations
 
@@ -19,23 +21,42 @@ from pathlib import Path
 
 import torch
 
-from algo.policy import ensemble, load_policy, policy_views
+from algo.policy import Policy, PolicyConfig, ensemble_members, load_policy, member_weights, policy_views
 
 
 def joined_checkpoint(checkpoints: list[str]) -> dict:
-    """The ensemble's checkpoint (a dict as ``crossway evaluate export`` writes); ValueError when a
-    file is not a policy or the members learnt from different view squares."""
+    """The ensemble's checkpoint: each member's weights and sizes (``algo.policy.load_policy`` joins
+    them into one network), the first one's views record and a note; ValueError when a file is not
+    a policy or the members learnt from different view squares."""
     policies = [load_policy(path) for path in checkpoints]
     views = {policy_views(path) for path in checkpoints}
     if len(views) != 1:
         raise ValueError(f"the checkpoints learnt from different view squares: {sorted(map(str, views))}")
-    joined = ensemble(policies)
+    members = []
+    for path, policy in zip(checkpoints, policies):  # an ensemble among the checkpoints joins in as its members
+        state = torch.load(Path(path), weights_only=False, map_location="cpu")
+        if "members" in state:
+            members.extend(state["members"])
+            continue
+        count = ensemble_members(policy)  # a joined network written whole splits into its equal blocks
+        weights = member_weights(policy, count)
+        for k in range(count):
+            # the output layers' biases were shared out among the count members: each one's own again
+            state = {name: w[k] * (count if name.endswith(("mu.bias", "value.bias")) else 1)
+                     for name, w in weights.items()}
+            members.append({"policy": state, "policy_config": asdict(_member_config(policy, count))})
     first = torch.load(Path(checkpoints[0]), weights_only=False, map_location="cpu")
-    out = {"policy": joined.state_dict(), "policy_config": asdict(joined.config), "version": None,
-           "agent_steps": None, "note": "output ensemble (mean before the tanh) of " + ", ".join(checkpoints)}
+    out = {"members": members, "version": None, "agent_steps": None,
+           "note": "output ensemble (mean before the tanh) of " + ", ".join(checkpoints)}
     if "views" in first:
         out["views"] = first["views"]
     return out
+
+
+def _member_config(policy: Policy, count: int) -> PolicyConfig:
+    config = policy.config
+    return PolicyConfig(conv1_channels=config.conv1_channels // count, conv2_channels=config.conv2_channels // count,
+                        hidden=config.hidden // count, standing_input=config.standing_input)
 
 
 def main() -> None:
@@ -50,10 +71,10 @@ def main() -> None:
     except ValueError as error:
         sys.exit(f"ensemble: {error}")
     torch.save(joined, args.out)
-    sizes = joined["policy_config"]
-    print(f"wrote {args.out}: the output ensemble of {len(args.checkpoints)} policies, network "
-          f"{sizes['conv1_channels']},{sizes['conv2_channels']},{sizes['hidden']}"
-          + (" with the standing-time input" if sizes["standing_input"] else ""))
+    sizes = load_policy(args.out).config
+    print(f"wrote {args.out}: the output ensemble of {len(joined['members'])} policies, one network "
+          f"{sizes.conv1_channels},{sizes.conv2_channels},{sizes.hidden}"
+          + (" with the standing-time input" if sizes.standing_input else ""))
 
 
 if __name__ == "__main__":
