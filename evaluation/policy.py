@@ -50,12 +50,16 @@ class PolicyDriver:
     dense layers' zero blocks.
     """
 
-    def __init__(self, sim, policy: Policy, sigma: float = 0.0, seed: int | None = None):
+    def __init__(self, sim, policy: Policy, sigma: float = 0.0, seed: int | None = None,
+                 members: int | None = None):
         self.sim = sim
         self.policy = policy
         self.sigma = sigma
         self._rng = np.random.default_rng(seed)
-        self.members = ensemble_members(policy)
+        # weight sets to run side by side: the split ensemble_members finds, unless given (1: the joined network)
+        self.members = ensemble_members(policy) if members is None else members
+        if policy.config.conv1_channels % self.members or (self.members > 1 and ensemble_members(policy) % self.members):
+            raise ValueError(f"the network does not split into {self.members} equal members")
         self._params = member_weights(policy, self.members)  # K weight sets (K = 1: the network itself)
         # one first-layer matrix for every member and head, columns ordered member by member
         # (acc channels, then sa channels, as after_conv1 takes each member's)

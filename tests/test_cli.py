@@ -41,6 +41,26 @@ def test_bench_bad_input(args, message):
     assert "Traceback" not in result.stderr
 
 
+
+def test_bench_policy_times_an_ensemble_as_driven_and_joined(tmp_path):
+    import torch
+    from dataclasses import asdict
+
+    from algo.policy import Policy, PolicyConfig
+
+    members = [Policy(PolicyConfig()) for _ in range(2)]
+    path = tmp_path / "ensemble.pt"
+    torch.save({"members": [{"policy": m.state_dict(), "policy_config": asdict(m.config)} for m in members]}, path)
+    result = crossway("bench", "policy", "--checkpoint", str(path), "--seconds", "0.5", "--cars", "3", "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["members"] == 2 and report["network"] == [32, 32, 256]
+    assert report["as_driven_calls_per_s"] > 0 and report["joined_calls_per_s"] > 0
+    assert report["as_driven_ms_per_car"] == pytest.approx(1000.0 / report["as_driven_calls_per_s"] / 3, rel=0.01)
+    refused = crossway("bench", "policy", "--checkpoint", str(tmp_path / "missing.pt"))
+    assert refused.returncode == 2
+    assert "no checkpoint file" in refused.stderr and "Traceback" not in refused.stderr
+
 def test_bench_actor_and_learner_print_json():
     actor = crossway("bench", "actor", "--scenario", "easy", "--seconds", "2", "--update-interval", "5", "--json",
                      timeout=180)

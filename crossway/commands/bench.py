@@ -67,6 +67,25 @@ def add_parser(subparsers) -> None:
     actor.add_argument("--json", action="store_true", help="print only the JSON object")
     actor.set_defaults(func=run_actor_bench)
 
+    policy = benches.add_parser(
+        "policy",
+        help="an evaluation driver's forward passes per second for a checkpoint",
+        description=(
+            "Time the network as every 'crossway evaluate' drives with it (evaluation.policy.PolicyDriver: "
+            "the matrix form of algo.stacked, --cars cars per call, random views). A checkpoint that "
+            "splits into equal members (an output ensemble, docs/scripts/ensemble.py) runs them side by "
+            "side; it is also timed as the one joined network, zero blocks multiplied, for comparison. "
+            "Pinned to one core, one torch thread."
+        ),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    policy.add_argument("--checkpoint", required=True, help="a checkpoint or models/*.pt policy")
+    policy.add_argument("--cars", type=int, default=12, help="cars per forward pass (hard has up to 12 lanes)")
+    policy.add_argument("--seconds", type=float, default=5.0, help="wall-clock time to measure each form [s]")
+    policy.add_argument("--no-pin", action="store_true", help="do not pin the process to one CPU core")
+    policy.add_argument("--json", action="store_true", help="print only the JSON object")
+    policy.set_defaults(func=run_policy_bench)
+
     learner = benches.add_parser(
         "learner",
         help="gradient pushes applied per second from synthetic pushes over Zenoh",
@@ -151,6 +170,43 @@ def run_sim(args) -> int:
         "python": platform.python_version(),
         "numpy": np.__version__,
     }
+    print(json.dumps(report))
+    return 0
+
+
+def run_policy_bench(args) -> int:
+    import torch
+
+    from algo.policy import load_policy
+    from evaluation.policy import PolicyDriver
+
+    if not args.seconds > 0 or args.cars < 1:
+        raise ValueError("--seconds must be > 0 and --cars >= 1")
+    policy = load_policy(args.checkpoint)  # a clear error for a file that is not a policy
+    cpu = None if args.no_pin else pin_to_one_core()
+    torch.set_num_threads(1)
+    rng = np.random.default_rng(0)
+    views = rng.integers(0, 256, (args.cars, 16, 84, 84), dtype=np.uint8)
+    scalars = np.column_stack([rng.uniform(0, 10, args.cars), np.full(args.cars, 8.0), rng.uniform(0, 5, args.cars)])
+    forms = {"as_driven": PolicyDriver(None, policy)}
+    if forms["as_driven"].members > 1:
+        forms["joined"] = PolicyDriver(None, policy, members=1)
+    report = {"bench": "policy", "checkpoint": str(args.checkpoint), "members": forms["as_driven"].members,
+              "network": [policy.config.conv1_channels, policy.config.conv2_channels, policy.config.hidden],
+              "cars_per_call": args.cars}
+    for name, driver in forms.items():
+        for _ in range(5):  # warm-up
+            driver.heads(views, scalars)
+        calls = 0
+        started = time.perf_counter()
+        while (elapsed := time.perf_counter() - started) < args.seconds or calls < 3:
+            driver.heads(views, scalars)
+            calls += 1
+        report[f"{name}_calls_per_s"] = round(calls / elapsed, 2)
+        report[f"{name}_ms_per_car"] = round(1000.0 * elapsed / calls / args.cars, 4)
+        if not args.json:
+            print(f"bench policy: {name}: {calls / elapsed:.1f} calls/s", file=sys.stderr)
+    report.update({"cpu_pinned": cpu, "torch": torch.__version__, "python": platform.python_version()})
     print(json.dumps(report))
     return 0
 
