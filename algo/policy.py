@@ -145,9 +145,9 @@ def ensemble(policies: list[Policy]) -> Policy:
     member's units read only its own units below: conv1 channels, conv2 channels and hidden units
     are each member's in turn, and the two output layers take each member's weights divided by the
     member count. A network with the standing-time input results when any member reads it; the
-    members that do not read it get zero weights from it. Evaluate it as any checkpoint; it costs
-    about as much as all its members together (more in the dense layers, whose zero blocks are
-    still multiplied). An output ensemble, not a weight average (docs/scripts/weight_soup.py).
+    members that do not read it get zero weights from it. Evaluation runs the members side by side
+    (``ensemble_members``, ``member_weights``) instead of multiplying the zero blocks. An output
+    ensemble, not a weight average (docs/scripts/weight_soup.py).
     """
     if not policies:
         raise ValueError("an ensemble needs at least one network")

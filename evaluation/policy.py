@@ -58,7 +58,7 @@ class PolicyDriver:
         self._rng = np.random.default_rng(seed)
         # weight sets to run side by side: the split ensemble_members finds, unless given (1: the joined network)
         self.members = ensemble_members(policy) if members is None else members
-        if policy.config.conv1_channels % self.members or (self.members > 1 and ensemble_members(policy) % self.members):
+        if self.members > 1 and ensemble_members(policy) % self.members:
             raise ValueError(f"the network does not split into {self.members} equal members")
         self._params = member_weights(policy, self.members)  # K weight sets (K = 1: the network itself)
         # one first-layer matrix for every member and head, columns ordered member by member

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import torch
 
-from algo.policy import Policy, PolicyConfig, ensemble_members, load_policy, member_weights, policy_views
+from algo.policy import load_policy, policy_views
 
 
 def joined_checkpoint(checkpoints: list[str]) -> dict:
@@ -32,31 +32,16 @@ def joined_checkpoint(checkpoints: list[str]) -> dict:
     views = {policy_views(path) for path in checkpoints}
     if len(views) != 1:
         raise ValueError(f"the checkpoints learnt from different view squares: {sorted(map(str, views))}")
+    states = [torch.load(Path(path), weights_only=False, map_location="cpu") for path in checkpoints]
     members = []
-    for path, policy in zip(checkpoints, policies):  # an ensemble among the checkpoints joins in as its members
-        state = torch.load(Path(path), weights_only=False, map_location="cpu")
-        if "members" in state:
-            members.extend(state["members"])
-            continue
-        count = ensemble_members(policy)  # a joined network written whole splits into its equal blocks
-        weights = member_weights(policy, count)
-        for k in range(count):
-            # the output layers' biases were shared out among the count members: each one's own again
-            state = {name: w[k] * (count if name.endswith(("mu.bias", "value.bias")) else 1)
-                     for name, w in weights.items()}
-            members.append({"policy": state, "policy_config": asdict(_member_config(policy, count))})
-    first = torch.load(Path(checkpoints[0]), weights_only=False, map_location="cpu")
+    for state, policy in zip(states, policies):  # an ensemble among the checkpoints joins in as its members
+        members.extend(state["members"] if "members" in state
+                       else [{"policy": policy.state_dict(), "policy_config": asdict(policy.config)}])
     out = {"members": members, "version": None, "agent_steps": None,
            "note": "output ensemble (mean before the tanh) of " + ", ".join(checkpoints)}
-    if "views" in first:
-        out["views"] = first["views"]
+    if "views" in states[0]:
+        out["views"] = states[0]["views"]
     return out
-
-
-def _member_config(policy: Policy, count: int) -> PolicyConfig:
-    config = policy.config
-    return PolicyConfig(conv1_channels=config.conv1_channels // count, conv2_channels=config.conv2_channels // count,
-                        hidden=config.hidden // count, standing_input=config.standing_input)
 
 
 def main() -> None:
