@@ -58,6 +58,52 @@ class PolicyConfig:
         return 3 if self.standing_input else 2
 
 
+@dataclass(frozen=True)
+class Caution:
+    """How an output ensemble brakes where its members disagree (not in the paper; session 24).
+
+    The acceleration's pre-activation becomes the members' mean minus ``std_factor`` times their
+    sample standard deviation, mu_acc = tanh(mean_k z_k - c * std_k z_k), a lower confidence bound
+    on the members' vote: a car slows where they disagree about the junction ahead and drives as
+    their mean where they agree. ``fade_standing_s`` lets c fall linearly to 0 over that much
+    standing time (the simulator's third scalar, under 0.5 m/s), so that a car waiting at its line
+    goes on the mean once it has stood that long. Steering and values keep the mean.
+    """
+
+    std_factor: float  # c, in standard deviations of the members' acceleration pre-activations
+    fade_standing_s: float | None = None  # [s]; None: c holds however long the car stands
+
+    def __post_init__(self):
+        if not (isinstance(self.std_factor, (int, float)) and math.isfinite(self.std_factor)
+                and self.std_factor >= 0):
+            raise ValueError(f"caution: std_factor must be a number >= 0, got {self.std_factor!r}")
+        if self.fade_standing_s is not None and not (isinstance(self.fade_standing_s, (int, float))
+                                                     and self.fade_standing_s > 0):
+            raise ValueError(f"caution: fade_standing_s must be > 0 s or None, got {self.fade_standing_s!r}")
+
+    def factor(self, standing_s: torch.Tensor) -> torch.Tensor | float:
+        """c for each car [B] from its standing time [B] in seconds."""
+        if self.fade_standing_s is None:
+            return self.std_factor
+        return self.std_factor * (1 - standing_s / self.fade_standing_s).clamp(min=0.0)
+
+    def record(self) -> dict:
+        """The checkpoint's ``caution`` entry."""
+        return asdict(self)
+
+
+def caution_from(source: str, record) -> Caution:
+    """The ``Caution`` of a checkpoint's ``caution`` entry; ValueError naming ``source`` when it is not one."""
+    if not isinstance(record, dict):
+        raise ValueError(f"{source}: its caution entry is not a table ({record!r})")
+    try:
+        return Caution(**record)
+    except TypeError as error:
+        raise ValueError(f"{source}: its caution entry does not match this crossway ({error})") from None
+    except ValueError as error:
+        raise ValueError(f"{source}: {error}") from None
+
+
 class SubModule(nn.Module):
     """One head of the paper's network: views and scalars to a Gaussian mean and a value."""
 
@@ -86,6 +132,9 @@ class Policy(nn.Module):
     def __init__(self, config: PolicyConfig = PolicyConfig()):
         super().__init__()
         self.config = config
+        # an output ensemble's rule for braking where its members disagree (``Caution``); applied
+        # where the members run side by side (evaluation.policy.PolicyDriver), not by ``forward``
+        self.caution: Caution | None = None
         self.acc = SubModule(config)
         self.sa = SubModule(config)
 
@@ -292,7 +341,8 @@ def load_policy(checkpoint: str | Path) -> Policy:
 
     A file that holds ``members`` (an output ensemble as docs/scripts/ensemble.py writes it, each
     member's weights and sizes) gives the one network ``ensemble`` joins them into: the file keeps
-    only the members, not the joined network's zero blocks."""
+    only the members, not the joined network's zero blocks, and may hold a ``caution`` entry
+    (``Caution``), which the returned network carries for ``evaluation.policy.PolicyDriver``."""
     path = Path(checkpoint)
     if not path.is_file():
         raise ValueError(f"no checkpoint file {str(path)!r}")
@@ -304,7 +354,12 @@ def load_policy(checkpoint: str | Path) -> Policy:
         members = state["members"]
         if not isinstance(members, list) or not members:
             raise ValueError(f"{path}: an ensemble file without members")
-        return ensemble([_policy_from(f"{path} (member {k + 1})", member) for k, member in enumerate(members)])
+        joined = ensemble([_policy_from(f"{path} (member {k + 1})", member) for k, member in enumerate(members)])
+        if state.get("caution") is not None:
+            if len(members) < 2:
+                raise ValueError(f"{path}: caution needs at least two members to disagree, it has one")
+            joined.caution = caution_from(str(path), state["caution"])
+        return joined
     return _policy_from(str(path), state)
 
 

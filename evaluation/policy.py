@@ -30,7 +30,7 @@ def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Pa
     state = torch.load(Path(checkpoint), weights_only=False, map_location="cpu")
     out = Path(out)
     # an ensemble keeps its members (algo.policy.load_policy joins them), not the joined zero blocks
-    weights = ({"members": state["members"]} if "members" in state
+    weights = ({"members": state["members"], "caution": state.get("caution")} if "members" in state
                else {"policy": policy.state_dict(), "policy_config": state["policy_config"]})
     exported = {**weights, "version": state.get("version"), "agent_steps": state.get("agent_steps"),
                 "run_id": state.get("run_id"), "note": note}
@@ -40,6 +40,14 @@ def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Pa
     return out
 
 
+def standing_of(scalars: torch.Tensor) -> torch.Tensor:
+    """The standing time [s] column of the simulator's scalars (``simcore.simulator.SCALARS``)."""
+    if scalars.shape[-1] < 3:
+        raise ValueError(f"caution fading with standing time needs the standing-time scalar (3 columns: speed, "
+                         f"target speed, standing time), got {scalars.shape[-1]}")
+    return scalars[:, 2]
+
+
 class PolicyDriver:
     """Acts for every learner slot of a ``Simulator`` from the newest ``StepResult``.
 
@@ -47,7 +55,8 @@ class PolicyDriver:
     about twice as fast on a CPU as its convolution modules for these layer shapes). A network
     that splits into K equal blocks (an output ensemble, ``algo.policy.ensemble``) runs as K
     weight sets at once, whose outputs before the tanh add up: the same function without the
-    dense layers' zero blocks.
+    dense layers' zero blocks. An ensemble with a ``caution`` (``algo.policy.Caution``) takes
+    its acceleration as the members' mean minus that many standard deviations of their votes.
     """
 
     def __init__(self, sim, policy: Policy, sigma: float = 0.0, seed: int | None = None,
@@ -60,6 +69,10 @@ class PolicyDriver:
         self.members = ensemble_members(policy) if members is None else members
         if self.members > 1 and ensemble_members(policy) % self.members:
             raise ValueError(f"the network does not split into {self.members} equal members")
+        self.caution = policy.caution  # how the members' acceleration votes combine (None: their mean)
+        if self.caution is not None and self.members < 2:
+            raise ValueError("the network's caution (algo.policy.Caution) needs its members side by side; "
+                             "it does not apply to the joined network (members=1)")
         self._params = member_weights(policy, self.members)  # K weight sets (K = 1: the network itself)
         # one first-layer matrix for every member and head, columns ordered member by member
         # (acc channels, then sa channels, as after_conv1 takes each member's)
@@ -78,7 +91,15 @@ class PolicyDriver:
             pre1 = pre1.reshape(n, pre1.shape[1], k, -1).permute(2, 0, 1, 3)  # [K, N, 441, 2*C1]
             speeds = torch.from_numpy(np.ascontiguousarray(scalars, dtype=np.float32))
             pre_mu, values = after_conv1(pre1, speeds[None].expand(k, *speeds.shape), self._params, squash=False)
-            mu = torch.tanh(pre_mu.sum(0))
+            if self.caution is None:
+                mu = torch.tanh(pre_mu.sum(0))
+            else:  # the members' own pre-activations; acceleration: mean - c * std (algo.policy.Caution)
+                z = pre_mu * k
+                pre = z.mean(0)
+                factor = (self.caution.factor(standing_of(speeds)) if self.caution.fade_standing_s is not None
+                          else self.caution.std_factor)
+                pre[:, 0] = pre[:, 0] - factor * z[:, :, 0].std(0)
+                mu = torch.tanh(pre)
         return mu.numpy().astype(np.float64), values.sum(0).numpy().astype(np.float64)
 
     def act(self, result) -> np.ndarray:

@@ -176,7 +176,8 @@ def test_ensemble_writes_one_network_driving_by_its_members_mean_and_refuses_oth
     import numpy as np
     import torch
 
-    from algo.policy import load_policy, preprocess
+    from algo.policy import Caution, load_policy, preprocess
+    from evaluation.policy import export_policy
 
     script = str(ROOT / "docs/scripts/ensemble.py")
     first, second = _policy_file(tmp_path / "a.pt", 1), _policy_file(tmp_path / "b.pt", 2, hidden=64)
@@ -201,6 +202,26 @@ def test_ensemble_writes_one_network_driving_by_its_members_mean_and_refuses_oth
     with torch.no_grad():
         v_again, v_c = load_policy(again)(views, scalars)[1], load_policy(third)(views, scalars)[1]
     torch.testing.assert_close(v_again, (v_a + v_b + v_c) / 3, atol=1e-5, rtol=1e-5)
+    cautious = tmp_path / "cautious.pt"  # the same members under another rule
+    result = subprocess.run([sys.executable, script, str(cautious), str(again), "--caution", "0.5",
+                             "--caution-fade-standing", "3"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "caution 0.5 fading over 3 s standing" in result.stdout
+    assert load_policy(cautious).caution == Caution(0.5, 3.0) and load_policy(again).caution is None
+    exported = export_policy(cautious, tmp_path / "exported.pt")
+    assert load_policy(exported).caution == Caution(0.5, 3.0)  # export keeps the rule
+    state = torch.load(cautious, weights_only=False)
+    state["caution"] = {"std_factor": "much"}
+    torch.save(state, tmp_path / "bad-caution.pt")
+    with pytest.raises(ValueError, match="bad-caution.pt: caution: std_factor"):
+        load_policy(tmp_path / "bad-caution.pt")
+    for bad_args, message in (([str(first), "--caution", "-1"], "std_factor must be"),
+                              ([str(first)], "at least two members"),
+                              ([str(first), str(second), "--caution-fade-standing", "2"], "needs --caution")):
+        refused = subprocess.run([sys.executable, script, str(tmp_path / "bad.pt"), *bad_args],
+                                 capture_output=True, text=True, timeout=120)
+        assert refused.returncode != 0 and message in refused.stderr, refused.stderr
+        assert not (tmp_path / "bad.pt").exists()
     other_views = tmp_path / "wide-views.pt"
     state = torch.load(first, weights_only=False)
     state["views"] = {"extent_m": 70.0, "shift_m": 0.0}

@@ -308,6 +308,52 @@ def test_policy_driver_runs_an_ensemble_as_its_members_with_the_same_outputs():
     np.testing.assert_allclose(means, np.stack([mu_acc.numpy(), mu_sa.numpy()], 1), atol=1e-5)
     np.testing.assert_allclose(values, np.stack([v_acc.numpy(), v_sa.numpy()], 1), atol=1e-4)
 
+def test_a_cautious_ensemble_brakes_by_its_members_disagreement_and_fades_with_standing_time():
+    """Caution: mu_acc = tanh(mean z - c * std z) over the members' pre-activations z_k, c falling
+    to 0 over the fade time of standing; steering stays the mean; the joined form refuses it."""
+    import torch
+
+    from algo.policy import Caution, Policy, ensemble
+    from evaluation.policy import PolicyDriver
+    from simcore.simulator import SimConfig, Simulator
+
+    torch.manual_seed(6)
+    members = []
+    for _ in range(3):
+        member = Policy()
+        with torch.no_grad():
+            member.acc.mu.weight.normal_(0.0, 0.05)  # members that disagree
+        members.append(member)
+    sim = Simulator("medium", SimConfig(delay_max_s=0.0), seed=2)
+    result = sim.reset()
+    plain = PolicyDriver(sim, ensemble(members))
+    for _ in range(5):
+        result = sim.step(plain.act(result))
+    active = np.flatnonzero(sim.learners_present)
+    views, scalars = result.views[active], result.scalars[active].copy()
+    scalars[:, 2] = np.linspace(0.0, 4.0, len(active))  # standing times from 0 to 4 s
+    z = np.stack([np.arctanh(PolicyDriver(sim, m).heads(views, scalars)[0]) for m in members])  # [K, B, 2]
+    mean, spread = z.mean(0), z[:, :, 0].std(0, ddof=1)
+    assert spread.min() > 0.01  # the members do disagree
+    for caution, factor in ((Caution(0.8), 0.8), (Caution(0.8, 2.0), 0.8 * np.clip(1 - scalars[:, 2] / 2.0, 0, None))):
+        joined = ensemble(members)
+        joined.caution = caution
+        means, _ = PolicyDriver(sim, joined).heads(views, scalars)
+        np.testing.assert_allclose(means[:, 0], np.tanh(mean[:, 0] - factor * spread), atol=1e-4)
+        np.testing.assert_allclose(means[:, 1], np.tanh(mean[:, 1]), atol=1e-4)  # steering: the mean
+    plain_means, _ = plain.heads(views, scalars)
+    assert (means[:, 0] <= plain_means[:, 0] + 1e-6).all()  # caution never accelerates harder
+    standing_long = scalars[:, 2] >= 2.0  # faded out: the plain mean again
+    np.testing.assert_allclose(means[standing_long, 0], plain_means[standing_long, 0], atol=1e-5)
+    assert (means[~standing_long, 0] < plain_means[~standing_long, 0] - 1e-4).all()
+    with pytest.raises(ValueError, match="members side by side"):
+        PolicyDriver(sim, joined, members=1)
+    with pytest.raises(ValueError, match="std_factor"):
+        Caution(-0.5)
+    with pytest.raises(ValueError, match="fade_standing_s"):
+        Caution(0.5, 0.0)
+
+
 def test_table1_chunks_of_a_test_are_summed():
     from evaluation.table1 import merge_chunks, summarise
 

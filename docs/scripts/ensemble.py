@@ -1,6 +1,7 @@
 """Join several policies into one that drives by the mean of their outputs (session 22).
 
-    python docs/scripts/ensemble.py OUT.pt CKPT CKPT [CKPT ...]
+    python docs/scripts/ensemble.py OUT.pt CKPT CKPT [CKPT ...] [--caution C [--caution-fade-standing S]]
+    python docs/scripts/ensemble.py OUT.pt ENSEMBLE.pt --caution C   (the same members, another rule)
 
 Writes one checkpoint that holds every member's weights and sizes; every crossway command loads
 it as one network (``algo.policy.load_policy``, ``algo.policy.ensemble``) whose acceleration and
@@ -10,7 +11,12 @@ or a size; they must have learnt from the same view square. An ensemble among th
 joins in as its members (so two ensembles of 3 make one of 6, each member counting once). OUT
 keeps the first one's views record and names the checkpoints in its note. Evaluate it as any
 checkpoint (``crossway evaluate table1 --checkpoint OUT.pt``); ``evaluation.policy.PolicyDriver``
-runs the members side by side, at less than the cost of all of them one after the other."""
+runs the members side by side, at less than the cost of all of them one after the other.
+
+``--caution C`` (session 24, ``algo.policy.Caution``) makes the ensemble brake where its members
+disagree: its acceleration is tanh of the members' mean pre-activation minus C of their standard
+deviations; ``--caution-fade-standing S`` lets C fall to 0 over S seconds of standing still.
+Without it the rule of an ensemble among the checkpoints is dropped (the plain mean)."""
 
 from __future__ import annotations
 
@@ -21,13 +27,14 @@ from pathlib import Path
 
 import torch
 
-from algo.policy import load_policy, policy_views
+from algo.policy import Caution, load_policy, policy_views
 
 
-def joined_checkpoint(checkpoints: list[str]) -> dict:
+def joined_checkpoint(checkpoints: list[str], caution: Caution | None = None) -> dict:
     """The ensemble's checkpoint: each member's weights and sizes (``algo.policy.load_policy`` joins
-    them into one network), the first one's views record and a note; ValueError when a file is not
-    a policy or the members learnt from different view squares."""
+    them into one network), the first one's views record, the ``caution`` rule and a note;
+    ValueError when a file is not a policy, the members learnt from different view squares or
+    fewer than two members result."""
     policies = [load_policy(path) for path in checkpoints]
     views = {policy_views(path) for path in checkpoints}
     if len(views) != 1:
@@ -37,8 +44,14 @@ def joined_checkpoint(checkpoints: list[str]) -> dict:
     for state, policy in zip(states, policies):  # an ensemble among the checkpoints joins in as its members
         members.extend(state["members"] if "members" in state
                        else [{"policy": policy.state_dict(), "policy_config": asdict(policy.config)}])
+    if len(members) < 2:
+        raise ValueError(f"an ensemble needs at least two members, the checkpoints hold {len(members)}")
+    rule = ("mean before the tanh" if caution is None else
+            f"mean before the tanh, acceleration minus {caution.std_factor:g} standard deviations"
+            + ("" if caution.fade_standing_s is None else f" fading over {caution.fade_standing_s:g} s standing"))
     out = {"members": members, "version": None, "agent_steps": None,
-           "note": "output ensemble (mean before the tanh) of " + ", ".join(checkpoints)}
+           "caution": None if caution is None else caution.record(),
+           "note": f"output ensemble ({rule}) of " + ", ".join(checkpoints)}
     if "views" in states[0]:
         out["views"] = states[0]["views"]
     return out
@@ -47,19 +60,28 @@ def joined_checkpoint(checkpoints: list[str]) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("out", help="where to write the joined checkpoint")
-    parser.add_argument("checkpoints", nargs="+", help="two or more policies (checkpoints or models/*.pt)")
+    parser.add_argument("checkpoints", nargs="+",
+                        help="policies to join (checkpoints or models/*.pt): two or more, or one ensemble")
+    parser.add_argument("--caution", type=float, default=None, metavar="C",
+                        help="brake where the members disagree: acceleration = tanh(mean - C x standard deviation "
+                             "of the members' pre-activations); default: the plain mean")
+    parser.add_argument("--caution-fade-standing", type=float, default=None, metavar="S",
+                        help="C falls linearly to 0 over S seconds of standing still (under 0.5 m/s) [s]")
     args = parser.parse_args()
-    if len(args.checkpoints) < 2:
-        parser.error("give at least two checkpoints to join")
+    if args.caution_fade_standing is not None and args.caution is None:
+        parser.error("--caution-fade-standing needs --caution")
     try:
-        joined = joined_checkpoint(args.checkpoints)
+        caution = None if args.caution is None else Caution(args.caution, args.caution_fade_standing)
+        joined = joined_checkpoint(args.checkpoints, caution)
     except ValueError as error:
         sys.exit(f"ensemble: {error}")
     torch.save(joined, args.out)
     sizes = load_policy(args.out).config
     print(f"wrote {args.out}: the output ensemble of {len(joined['members'])} policies, one network "
           f"{sizes.conv1_channels},{sizes.conv2_channels},{sizes.hidden}"
-          + (" with the standing-time input" if sizes.standing_input else ""))
+          + (" with the standing-time input" if sizes.standing_input else "")
+          + ("" if caution is None else f", caution {caution.std_factor:g}"
+             + ("" if caution.fade_standing_s is None else f" fading over {caution.fade_standing_s:g} s standing")))
 
 
 if __name__ == "__main__":
