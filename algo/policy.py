@@ -67,11 +67,14 @@ class Caution:
     on the members' vote: a car slows where they disagree about the junction ahead and drives as
     their mean where they agree. ``fade_standing_s`` lets c fall linearly to 0 over that much
     standing time (the simulator's third scalar, under 0.5 m/s), so that a car waiting at its line
-    goes on the mean once it has stood that long. Steering and values keep the mean.
+    goes on the mean once it has stood that long. ``full_from_speed_mps`` scales c by the car's
+    speed, from 0 at standstill to all of it at that speed, so that a car moving off (from a stop
+    line) is not held back and a car driving on is. Steering and values keep the mean.
     """
 
     std_factor: float  # c, in standard deviations of the members' acceleration pre-activations
     fade_standing_s: float | None = None  # [s]; None: c holds however long the car stands
+    full_from_speed_mps: float | None = None  # [m/s]; None: c at every speed
 
     def __post_init__(self):
         if not (isinstance(self.std_factor, (int, float)) and math.isfinite(self.std_factor)
@@ -80,12 +83,22 @@ class Caution:
         if self.fade_standing_s is not None and not (isinstance(self.fade_standing_s, (int, float))
                                                      and self.fade_standing_s > 0):
             raise ValueError(f"caution: fade_standing_s must be > 0 s or None, got {self.fade_standing_s!r}")
+        if self.full_from_speed_mps is not None and not (isinstance(self.full_from_speed_mps, (int, float))
+                                                         and self.full_from_speed_mps > 0):
+            raise ValueError(f"caution: full_from_speed_mps must be > 0 m/s or None, got {self.full_from_speed_mps!r}")
 
-    def factor(self, standing_s: torch.Tensor) -> torch.Tensor | float:
-        """c for each car [B] from its standing time [B] in seconds."""
-        if self.fade_standing_s is None:
-            return self.std_factor
-        return self.std_factor * (1 - standing_s / self.fade_standing_s).clamp(min=0.0)
+    def factor(self, scalars: torch.Tensor) -> torch.Tensor | float:
+        """c for each car [B] from the simulator's scalars [B, 3] (speed [m/s], target speed [m/s],
+        standing time [s]); only the columns the rule reads need be there."""
+        factor = self.std_factor
+        if self.fade_standing_s is not None:
+            if scalars.shape[-1] < 3:
+                raise ValueError(f"caution fading with standing time needs the standing-time scalar (3 columns: "
+                                 f"speed, target speed, standing time), got {scalars.shape[-1]}")
+            factor = factor * (1 - scalars[:, 2] / self.fade_standing_s).clamp(min=0.0)
+        if self.full_from_speed_mps is not None:
+            factor = factor * (scalars[:, 0] / self.full_from_speed_mps).clamp(0.0, 1.0)
+        return factor
 
     def record(self) -> dict:
         """The checkpoint's ``caution`` entry."""

@@ -40,14 +40,6 @@ def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Pa
     return out
 
 
-def standing_of(scalars: torch.Tensor) -> torch.Tensor:
-    """The standing time [s] column of the simulator's scalars (``simcore.simulator.SCALARS``)."""
-    if scalars.shape[-1] < 3:
-        raise ValueError(f"caution fading with standing time needs the standing-time scalar (3 columns: speed, "
-                         f"target speed, standing time), got {scalars.shape[-1]}")
-    return scalars[:, 2]
-
-
 class PolicyDriver:
     """Acts for every learner slot of a ``Simulator`` from the newest ``StepResult``.
 
@@ -96,9 +88,7 @@ class PolicyDriver:
             else:  # the members' own pre-activations; acceleration: mean - c * std (algo.policy.Caution)
                 z = pre_mu * k
                 pre = z.mean(0)
-                factor = (self.caution.factor(standing_of(speeds)) if self.caution.fade_standing_s is not None
-                          else self.caution.std_factor)
-                pre[:, 0] = pre[:, 0] - factor * z[:, :, 0].std(0)
+                pre[:, 0] = pre[:, 0] - self.caution.factor(speeds) * z[:, :, 0].std(0)
                 mu = torch.tanh(pre)
         return mu.numpy().astype(np.float64), values.sum(0).numpy().astype(np.float64)
 

@@ -217,7 +217,7 @@ def test_ensemble_writes_one_network_driving_by_its_members_mean_and_refuses_oth
         load_policy(tmp_path / "bad-caution.pt")
     for bad_args, message in (([str(first), "--caution", "-1"], "std_factor must be"),
                               ([str(first)], "at least two members"),
-                              ([str(first), str(second), "--caution-fade-standing", "2"], "needs --caution")):
+                              ([str(first), str(second), "--caution-fade-standing", "2"], "need --caution")):
         refused = subprocess.run([sys.executable, script, str(tmp_path / "bad.pt"), *bad_args],
                                  capture_output=True, text=True, timeout=120)
         assert refused.returncode != 0 and message in refused.stderr, refused.stderr

@@ -346,12 +346,20 @@ def test_a_cautious_ensemble_brakes_by_its_members_disagreement_and_fades_with_s
     standing_long = scalars[:, 2] >= 2.0  # faded out: the plain mean again
     np.testing.assert_allclose(means[standing_long, 0], plain_means[standing_long, 0], atol=1e-5)
     assert (means[~standing_long, 0] < plain_means[~standing_long, 0] - 1e-4).all()
+    scaled = ensemble(members)  # caution scaled by speed: none at standstill, all of it from 4 m/s
+    scaled.caution = Caution(0.8, None, 4.0)
+    scaled_means, _ = PolicyDriver(sim, scaled).heads(views, scalars)
+    factor = 0.8 * np.clip(scalars[:, 0] / 4.0, 0, 1)
+    assert factor.min() < 0.8  # some cars below 4 m/s
+    np.testing.assert_allclose(scaled_means[:, 0], np.tanh(mean[:, 0] - factor * spread), atol=1e-4)
     with pytest.raises(ValueError, match="members side by side"):
         PolicyDriver(sim, joined, members=1)
     with pytest.raises(ValueError, match="std_factor"):
         Caution(-0.5)
     with pytest.raises(ValueError, match="fade_standing_s"):
         Caution(0.5, 0.0)
+    with pytest.raises(ValueError, match="full_from_speed_mps"):
+        Caution(0.5, None, -1.0)
 
 
 def test_table1_chunks_of_a_test_are_summed():

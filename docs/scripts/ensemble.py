@@ -1,6 +1,7 @@
 """Join several policies into one that drives by the mean of their outputs (session 22).
 
-    python docs/scripts/ensemble.py OUT.pt CKPT CKPT [CKPT ...] [--caution C [--caution-fade-standing S]]
+    python docs/scripts/ensemble.py OUT.pt CKPT CKPT [CKPT ...] [--caution C [--caution-fade-standing S]
+        [--caution-full-from-speed V]]
     python docs/scripts/ensemble.py OUT.pt ENSEMBLE.pt --caution C   (the same members, another rule)
 
 Writes one checkpoint that holds every member's weights and sizes; every crossway command loads
@@ -15,7 +16,8 @@ runs the members side by side, at less than the cost of all of them one after th
 
 ``--caution C`` (session 24, ``algo.policy.Caution``) makes the ensemble brake where its members
 disagree: its acceleration is tanh of the members' mean pre-activation minus C of their standard
-deviations; ``--caution-fade-standing S`` lets C fall to 0 over S seconds of standing still.
+deviations; ``--caution-fade-standing S`` lets C fall to 0 over S seconds of standing still,
+``--caution-full-from-speed V`` scales C with the car's speed (0 at standstill, all of it from V m/s).
 Without it the rule of an ensemble among the checkpoints is dropped (the plain mean)."""
 
 from __future__ import annotations
@@ -48,7 +50,8 @@ def joined_checkpoint(checkpoints: list[str], caution: Caution | None = None) ->
         raise ValueError(f"an ensemble needs at least two members, the checkpoints hold {len(members)}")
     rule = ("mean before the tanh" if caution is None else
             f"mean before the tanh, acceleration minus {caution.std_factor:g} standard deviations"
-            + ("" if caution.fade_standing_s is None else f" fading over {caution.fade_standing_s:g} s standing"))
+            + ("" if caution.fade_standing_s is None else f" fading over {caution.fade_standing_s:g} s standing")
+            + ("" if caution.full_from_speed_mps is None else f", all of it from {caution.full_from_speed_mps:g} m/s"))
     out = {"members": members, "version": None, "agent_steps": None,
            "caution": None if caution is None else caution.record(),
            "note": f"output ensemble ({rule}) of " + ", ".join(checkpoints)}
@@ -67,11 +70,14 @@ def main() -> None:
                              "of the members' pre-activations); default: the plain mean")
     parser.add_argument("--caution-fade-standing", type=float, default=None, metavar="S",
                         help="C falls linearly to 0 over S seconds of standing still (under 0.5 m/s) [s]")
+    parser.add_argument("--caution-full-from-speed", type=float, default=None, metavar="V",
+                        help="C grows linearly with the car's speed, from 0 at standstill to all of it at V m/s")
     args = parser.parse_args()
-    if args.caution_fade_standing is not None and args.caution is None:
-        parser.error("--caution-fade-standing needs --caution")
+    if (args.caution_fade_standing is not None or args.caution_full_from_speed is not None) and args.caution is None:
+        parser.error("--caution-fade-standing and --caution-full-from-speed need --caution")
     try:
-        caution = None if args.caution is None else Caution(args.caution, args.caution_fade_standing)
+        caution = (None if args.caution is None else
+                   Caution(args.caution, args.caution_fade_standing, args.caution_full_from_speed))
         joined = joined_checkpoint(args.checkpoints, caution)
     except ValueError as error:
         sys.exit(f"ensemble: {error}")
@@ -81,7 +87,8 @@ def main() -> None:
           f"{sizes.conv1_channels},{sizes.conv2_channels},{sizes.hidden}"
           + (" with the standing-time input" if sizes.standing_input else "")
           + ("" if caution is None else f", caution {caution.std_factor:g}"
-             + ("" if caution.fade_standing_s is None else f" fading over {caution.fade_standing_s:g} s standing")))
+             + ("" if caution.fade_standing_s is None else f" fading over {caution.fade_standing_s:g} s standing")
+             + ("" if caution.full_from_speed_mps is None else f", all of it from {caution.full_from_speed_mps:g} m/s")))
 
 
 if __name__ == "__main__":
