@@ -27,7 +27,9 @@ import torch
 from torch import nn
 
 from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING
-from simcore.views import VIEW_EXTENT_M
+from simcore.rightofway import SIGN_NAMES
+from simcore.simulator import HISTORY
+from simcore.views import CHANNELS, STOP_LINE, VIEW_EXTENT_M, YIELD_LINE
 
 VIEW_SHAPE = (16, 84, 84)
 CONV2_CELLS = 10 * 10  # the second convolution's output grid over 84 x 84 views
@@ -69,12 +71,15 @@ class Caution:
     standing time (the simulator's third scalar, under 0.5 m/s), so that a car waiting at its line
     goes on the mean once it has stood that long. ``full_from_speed_mps`` scales c by the car's
     speed, from 0 at standstill to all of it at that speed, so that a car moving off (from a stop
-    line) is not held back and a car driving on is. Steering and values keep the mean.
+    line) is not held back and a car driving on is. ``signs`` limits it to the cars whose own sign
+    is one of those, as their newest view shows it (``sign_in_view``: a stop line, a yield line, or
+    none in sight). Steering and values keep the mean.
     """
 
     std_factor: float  # c, in standard deviations of the members' acceleration pre-activations
     fade_standing_s: float | None = None  # [s]; None: c holds however long the car stands
     full_from_speed_mps: float | None = None  # [m/s]; None: c at every speed
+    signs: tuple[str, ...] | None = None  # sign names ("none", "yield", "stop"); None: every car
 
     def __post_init__(self):
         if not (isinstance(self.std_factor, (int, float)) and math.isfinite(self.std_factor)
@@ -86,11 +91,25 @@ class Caution:
         if self.full_from_speed_mps is not None and not (isinstance(self.full_from_speed_mps, (int, float))
                                                          and self.full_from_speed_mps > 0):
             raise ValueError(f"caution: full_from_speed_mps must be > 0 m/s or None, got {self.full_from_speed_mps!r}")
+        if self.signs is not None:
+            if isinstance(self.signs, str) or not isinstance(self.signs, (tuple, list)):
+                raise ValueError(f"caution: signs must be a list of sign names or None, got {self.signs!r}")
+            unknown = sorted(set(self.signs) - set(SIGN_NAMES.values()))
+            if unknown or not self.signs:
+                raise ValueError(f"caution: signs must name some of {', '.join(SIGN_NAMES.values())}, "
+                                 f"got {list(self.signs)!r}")
+            object.__setattr__(self, "signs", tuple(self.signs))
 
-    def factor(self, scalars: torch.Tensor) -> torch.Tensor | float:
+    def factor(self, scalars: torch.Tensor, views: np.ndarray | None = None) -> torch.Tensor | float:
         """c for each car [B] from the simulator's scalars [B, 3] (speed [m/s], target speed [m/s],
-        standing time [s]); only the columns the rule reads need be there."""
+        standing time [s]) and, when the rule reads signs, its uint8 views [B, 16, 84, 84]; only the
+        columns the rule reads need be there."""
         factor = self.std_factor
+        if self.signs is not None:
+            if views is None:
+                raise ValueError("caution by sign needs the views (the sign channel shows each car's sign)")
+            shown = sign_in_view(views)
+            factor = factor * torch.from_numpy(np.isin(shown, list(self.signs))).to(scalars.dtype)
         if self.fade_standing_s is not None:
             if scalars.shape[-1] < 3:
                 raise ValueError(f"caution fading with standing time needs the standing-time scalar (3 columns: "
@@ -103,6 +122,22 @@ class Caution:
     def record(self) -> dict:
         """The checkpoint's ``caution`` entry."""
         return asdict(self)
+
+    def describe(self) -> str:
+        """The rule in words, as notes and messages give it."""
+        return (f"acceleration minus {self.std_factor:g} standard deviations"
+                + ("" if self.fade_standing_s is None else f" fading over {self.fade_standing_s:g} s standing")
+                + ("" if self.full_from_speed_mps is None else f", all of it from {self.full_from_speed_mps:g} m/s")
+                + ("" if self.signs is None else f", for cars at {' / '.join(self.signs)} signs only"))
+
+
+def sign_in_view(views: np.ndarray) -> np.ndarray:
+    """Each car's sign name [B] as its newest frame's sign channel shows it (``simcore.views``):
+    "stop" where a stop line is in sight, "yield" where a yield line is, else "none" (no sign, or
+    the car's line not, or no longer, in its 50 m square)."""
+    plane = views[:, CHANNELS.index("sign") * HISTORY + HISTORY - 1].reshape(len(views), -1)
+    stop, give_way = (plane == STOP_LINE).any(1), (plane == YIELD_LINE).any(1)
+    return np.where(stop, "stop", np.where(give_way, "yield", "none"))
 
 
 def caution_from(source: str, record) -> Caution:

@@ -88,7 +88,7 @@ class PolicyDriver:
             else:  # the members' own pre-activations; acceleration: mean - c * std (algo.policy.Caution)
                 z = pre_mu * k
                 pre = z.mean(0)
-                pre[:, 0] = pre[:, 0] - self.caution.factor(speeds) * z[:, :, 0].std(0)
+                pre[:, 0] = pre[:, 0] - self.caution.factor(speeds, views) * z[:, :, 0].std(0)
                 mu = torch.tanh(pre)
         return mu.numpy().astype(np.float64), values.sum(0).numpy().astype(np.float64)
 

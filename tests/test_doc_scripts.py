@@ -206,8 +206,14 @@ def test_ensemble_writes_one_network_driving_by_its_members_mean_and_refuses_oth
     result = subprocess.run([sys.executable, script, str(cautious), str(again), "--caution", "0.5",
                              "--caution-fade-standing", "3"], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
-    assert "caution 0.5 fading over 3 s standing" in result.stdout
+    assert "caution: acceleration minus 0.5 standard deviations fading over 3 s standing" in result.stdout
     assert load_policy(cautious).caution == Caution(0.5, 3.0) and load_policy(again).caution is None
+    by_sign = tmp_path / "by-sign.pt"
+    result = subprocess.run([sys.executable, script, str(by_sign), str(again), "--caution", "0.5",
+                             "--caution-signs", "none, yield"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "for cars at none / yield signs only" in result.stdout
+    assert load_policy(by_sign).caution == Caution(0.5, signs=("none", "yield"))
     exported = export_policy(cautious, tmp_path / "exported.pt")
     assert load_policy(exported).caution == Caution(0.5, 3.0)  # export keeps the rule
     state = torch.load(cautious, weights_only=False)
@@ -217,7 +223,9 @@ def test_ensemble_writes_one_network_driving_by_its_members_mean_and_refuses_oth
         load_policy(tmp_path / "bad-caution.pt")
     for bad_args, message in (([str(first), "--caution", "-1"], "std_factor must be"),
                               ([str(first)], "at least two members"),
-                              ([str(first), str(second), "--caution-fade-standing", "2"], "need --caution")):
+                              ([str(first), str(second), "--caution-fade-standing", "2"], "need --caution"),
+                              ([str(first), str(second), "--caution", "1", "--caution-signs", "none,amber"],
+                               "signs must name some of none, yield, stop")):
         refused = subprocess.run([sys.executable, script, str(tmp_path / "bad.pt"), *bad_args],
                                  capture_output=True, text=True, timeout=120)
         assert refused.returncode != 0 and message in refused.stderr, refused.stderr

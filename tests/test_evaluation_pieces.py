@@ -362,6 +362,56 @@ def test_a_cautious_ensemble_brakes_by_its_members_disagreement_and_fades_with_s
         Caution(0.5, None, -1.0)
 
 
+def test_caution_by_sign_reads_each_cars_sign_from_its_view_and_spares_the_others():
+    """``sign_in_view`` reads a car's own sign line from its newest frame ("none" until the line
+    is in sight); a caution limited to signs leaves the other cars on the plain mean."""
+    import torch
+
+    from algo.policy import Caution, Policy, ensemble, sign_in_view
+    from evaluation.policy import PolicyDriver
+    from simcore.rightofway import SIGN_NAMES, Sign
+    from simcore.simulator import SimConfig, Simulator
+
+    sim = Simulator("hard", SimConfig(delay_max_s=0.0), seed=3)
+    result = sim.reset()
+    throttle = np.zeros((sim.num_slots, 2))
+    throttle[:, 0] = 1.0  # m/s^2: every car rolls towards its line
+    first_shown = sign_in_view(result.views[np.flatnonzero(sim.learners_present)])
+    for _ in range(40):
+        result = sim.step(throttle)
+    active = np.flatnonzero(sim.learners_present)
+    shown = sign_in_view(result.views[active])
+    truth = np.array([SIGN_NAMES[Sign(int(sim.sign[slot]))] for slot in active])
+    assert (first_shown == "none").all()  # every line still out of the 50 m square at the start
+    assert ((shown == truth) | (shown == "none")).all() and "stop" in shown and (truth == "none").any()
+    np.testing.assert_array_equal(shown[truth == "none"], "none")
+
+    torch.manual_seed(6)
+    members = []
+    for _ in range(3):
+        member = Policy(Policy().config)
+        with torch.no_grad():
+            member.acc.mu.weight.normal_(0.0, 0.05)  # members that disagree
+        members.append(member)
+    views, scalars = result.views[active], result.scalars[active]
+    plain_means, _ = PolicyDriver(sim, ensemble(members)).heads(views, scalars)
+    everyone, by_sign = ensemble(members), ensemble(members)
+    everyone.caution, by_sign.caution = Caution(0.8), Caution(0.8, signs=["none", "yield"])
+    all_means, _ = PolicyDriver(sim, everyone).heads(views, scalars)
+    sign_means, _ = PolicyDriver(sim, by_sign).heads(views, scalars)
+    at_stop = shown == "stop"
+    np.testing.assert_allclose(sign_means[at_stop], plain_means[at_stop], atol=1e-6)  # spared
+    np.testing.assert_allclose(sign_means[~at_stop], all_means[~at_stop], atol=1e-6)
+    assert (all_means[at_stop, 0] < plain_means[at_stop, 0] - 1e-4).all()  # they would have braked
+    assert by_sign.caution.signs == ("none", "yield") and Caution(**by_sign.caution.record()) == by_sign.caution
+    with pytest.raises(ValueError, match="needs the views"):
+        by_sign.caution.factor(torch.from_numpy(scalars))
+    with pytest.raises(ValueError, match="signs must name"):
+        Caution(0.5, signs=("none", "red"))
+    with pytest.raises(ValueError, match="list of sign names"):
+        Caution(0.5, signs="stop")
+
+
 def test_table1_chunks_of_a_test_are_summed():
     from evaluation.table1 import merge_chunks, summarise
 

@@ -1,7 +1,7 @@
 """Join several policies into one that drives by the mean of their outputs (session 22).
 
     python docs/scripts/ensemble.py OUT.pt CKPT CKPT [CKPT ...] [--caution C [--caution-fade-standing S]
-        [--caution-full-from-speed V]]
+        [--caution-full-from-speed V] [--caution-signs none,yield]]
     python docs/scripts/ensemble.py OUT.pt ENSEMBLE.pt --caution C   (the same members, another rule)
 
 Writes one checkpoint that holds every member's weights and sizes; every crossway command loads
@@ -17,7 +17,8 @@ runs the members side by side, at less than the cost of all of them one after th
 ``--caution C`` (session 24, ``algo.policy.Caution``) makes the ensemble brake where its members
 disagree: its acceleration is tanh of the members' mean pre-activation minus C of their standard
 deviations; ``--caution-fade-standing S`` lets C fall to 0 over S seconds of standing still,
-``--caution-full-from-speed V`` scales C with the car's speed (0 at standstill, all of it from V m/s).
+``--caution-full-from-speed V`` scales C with the car's speed (0 at standstill, all of it from V m/s),
+``--caution-signs`` limits it to cars whose view shows one of those signs (``algo.policy.sign_in_view``).
 Without it the rule of an ensemble among the checkpoints is dropped (the plain mean)."""
 
 from __future__ import annotations
@@ -48,10 +49,7 @@ def joined_checkpoint(checkpoints: list[str], caution: Caution | None = None) ->
                        else [{"policy": policy.state_dict(), "policy_config": asdict(policy.config)}])
     if len(members) < 2:
         raise ValueError(f"an ensemble needs at least two members, the checkpoints hold {len(members)}")
-    rule = ("mean before the tanh" if caution is None else
-            f"mean before the tanh, acceleration minus {caution.std_factor:g} standard deviations"
-            + ("" if caution.fade_standing_s is None else f" fading over {caution.fade_standing_s:g} s standing")
-            + ("" if caution.full_from_speed_mps is None else f", all of it from {caution.full_from_speed_mps:g} m/s"))
+    rule = "mean before the tanh" + ("" if caution is None else f", {caution.describe()}")
     out = {"members": members, "version": None, "agent_steps": None,
            "caution": None if caution is None else caution.record(),
            "note": f"output ensemble ({rule}) of " + ", ".join(checkpoints)}
@@ -72,12 +70,17 @@ def main() -> None:
                         help="C falls linearly to 0 over S seconds of standing still (under 0.5 m/s) [s]")
     parser.add_argument("--caution-full-from-speed", type=float, default=None, metavar="V",
                         help="C grows linearly with the car's speed, from 0 at standstill to all of it at V m/s")
+    parser.add_argument("--caution-signs", default=None, metavar="SIGNS",
+                        help="brake only cars whose view shows one of these signs, comma-separated from "
+                             "none, yield, stop (e.g. none,yield); default: every car")
     args = parser.parse_args()
-    if (args.caution_fade_standing is not None or args.caution_full_from_speed is not None) and args.caution is None:
-        parser.error("--caution-fade-standing and --caution-full-from-speed need --caution")
+    if (args.caution_fade_standing is not None or args.caution_full_from_speed is not None
+            or args.caution_signs is not None) and args.caution is None:
+        parser.error("--caution-fade-standing, --caution-full-from-speed and --caution-signs need --caution")
     try:
+        signs = None if args.caution_signs is None else tuple(s.strip() for s in args.caution_signs.split(","))
         caution = (None if args.caution is None else
-                   Caution(args.caution, args.caution_fade_standing, args.caution_full_from_speed))
+                   Caution(args.caution, args.caution_fade_standing, args.caution_full_from_speed, signs))
         joined = joined_checkpoint(args.checkpoints, caution)
     except ValueError as error:
         sys.exit(f"ensemble: {error}")
@@ -86,9 +89,7 @@ def main() -> None:
     print(f"wrote {args.out}: the output ensemble of {len(joined['members'])} policies, one network "
           f"{sizes.conv1_channels},{sizes.conv2_channels},{sizes.hidden}"
           + (" with the standing-time input" if sizes.standing_input else "")
-          + ("" if caution is None else f", caution {caution.std_factor:g}"
-             + ("" if caution.fade_standing_s is None else f" fading over {caution.fade_standing_s:g} s standing")
-             + ("" if caution.full_from_speed_mps is None else f", all of it from {caution.full_from_speed_mps:g} m/s")))
+          + ("" if caution is None else f"; caution: {caution.describe()}"))
 
 
 if __name__ == "__main__":
