@@ -1,7 +1,8 @@
 """``crossway pretrain``: a warm start for D-A3C from a privileged scripted teacher (not in the paper).
 
 One process, no transport: a simulator whose every car is labelled by ``ScriptedDriver`` (which
-reads the right of way from the simulator) and driven either by it or by the student network,
+reads the right of way from the simulator), or by a trained policy (``PolicyTeacher``: policy
+distillation, e.g. of an output ensemble into one network), and driven either by it or by the student network,
 a ``DemonstrationBuffer`` and Adam on the imitation loss (``algo.imitation``). Rounds alternate
 collection and training. A new episode is driven by the teacher with probability
 0.5 ** (samples collected / ``teacher_half_life``): 1 at first, then less and less (DAgger, Ross
@@ -85,6 +86,38 @@ class PretrainConfig:
     # give the network a third scalar input, the time the car has stood [s] (algo.policy.PolicyConfig);
     # a loaded network gets it with zero weights (unread until training moves them). Not the paper's
     standing_input: bool = False
+    # distil a trained policy instead (an output ensemble, docs/scripts/ensemble.py): its Gaussian means
+    # are the labels and the scripted teacher's options above do not apply. None: the scripted teacher
+    teacher_checkpoint: Path | None = None
+
+
+# the scripted teacher's settings; a policy teacher (teacher_checkpoint) refuses any of them changed
+SCRIPTED_TEACHER_FIELDS = ("teacher_sight", "teacher_approach_mps", "teacher_approach_signs",
+                           "teacher_brake_for_blockers", "teacher_wait_outside_zones", "teacher_break_wait_cycles",
+                           "teacher_patience_s", "teacher_blocker_patience_s", "blocker_weight")
+
+
+class PolicyTeacher:
+    """A trained policy as the teacher (policy distillation): its Gaussian means, as ``crossway
+    evaluate`` drives it (``evaluation.policy.PolicyDriver``, an ensemble's members side by side
+    and its caution applied), label every car. It never brakes "for a blocker" in the scripted
+    driver's sense, so ``blocker_bound`` stays False."""
+
+    def __init__(self, sim, checkpoint: Path):
+        from algo.policy import policy_views
+        from evaluation.policy import PolicyDriver
+
+        views = policy_views(checkpoint)
+        if views != (sim.spec.views.extent_m, sim.spec.views.shift_m):
+            raise ValueError(f"teacher {checkpoint} learnt from a {views[0]:g} m view square "
+                             f"{views[1]:g} m ahead; scenario {sim.spec.name!r} shows {sim.spec.views.extent_m:g} m "
+                             f"{sim.spec.views.shift_m:g} m ahead")
+        self.checkpoint = checkpoint
+        self.driver = PolicyDriver(sim, load_policy(checkpoint))
+        self.blocker_bound = np.zeros(sim.num_slots, dtype=bool)
+
+    def act(self, result) -> np.ndarray:
+        return self.driver.act(result)
 
 
 def _config_dict(config: PretrainConfig) -> dict:
@@ -130,6 +163,12 @@ class Pretrainer:
             raise ValueError(f"priority_exponent must be >= 0 (0: uniform), got {config.priority_exponent}")
         if config.average_half_life is not None and not 0.0 < config.average_half_life < float("inf"):
             raise ValueError(f"average_half_life must be > 0 Adam steps or None, got {config.average_half_life}")
+        if config.teacher_checkpoint is not None:
+            changed = [name for name in SCRIPTED_TEACHER_FIELDS
+                       if getattr(config, name) != getattr(PretrainConfig, name)]
+            if changed:
+                raise ValueError(f"{', '.join(changed)} shape the scripted teacher; a policy teacher "
+                                 f"(teacher_checkpoint) takes none of them")
         self.config = config
         torch.manual_seed(config.seed)
         torch.set_num_threads(config.torch_threads)
@@ -153,7 +192,10 @@ class Pretrainer:
             self.averaged = {name: p.detach().clone() for name, p in self.policy.named_parameters()}
         sim_config = SimConfig() if config.delay_max_s is None else SimConfig(delay_max_s=config.delay_max_s)
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
-        self.teacher = scripted_driver(self.sim, teacher_options)
+        if config.teacher_checkpoint is None:
+            self.teacher = scripted_driver(self.sim, teacher_options)
+        else:
+            self.teacher = PolicyTeacher(self.sim, Path(config.teacher_checkpoint))
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma, config.priority_exponent)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()
@@ -181,7 +223,9 @@ class Pretrainer:
             result = self.result
             for slot in np.flatnonzero(result.started):
                 self.by_teacher[slot] = self.rng.random() < self.teacher_probability
-            teacher_actions = self.teacher.act()  # once per step: it keeps each car's waiting time
+            # once per step: the scripted teacher keeps each car's waiting time
+            teacher_actions = (self.teacher.act(result) if isinstance(self.teacher, PolicyTeacher)
+                               else self.teacher.act())
             actions = teacher_actions.copy()
             present = np.flatnonzero(sim.learners_present)
             prioritized = self.config.priority_exponent > 0  # then the student's error is measured on every car
@@ -298,7 +342,9 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     approach += f", patience {config.teacher_patience_s:g} s"
     if config.teacher_brake_for_blockers:
         approach += f" (for blockers {config.teacher_blocker_patience_s:g} s)"
-    log(f"pretrain {config.scenario}: teacher ScriptedDriver (sight: {config.teacher_sight}{approach}), "
+    teacher = (f"ScriptedDriver (sight: {config.teacher_sight}{approach})" if config.teacher_checkpoint is None
+               else f"the policy {config.teacher_checkpoint} (its Gaussian means)")
+    log(f"pretrain {config.scenario}: teacher {teacher}, "
         f"network {_sizes(trainer.policy.config)}, buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")
     started = time.monotonic()

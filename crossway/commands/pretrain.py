@@ -1,4 +1,5 @@
-"""``crossway pretrain``: a warm start for ``crossway train`` from a privileged scripted teacher."""
+"""``crossway pretrain``: a warm start for ``crossway train`` from a privileged scripted teacher, or a
+policy distilled from a trained one (``--teacher-checkpoint``)."""
 
 from __future__ import annotations
 
@@ -37,6 +38,12 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--value-coef", type=float, default=0.5, help="weight of the value losses")
     parser.add_argument("--gamma", type=float, default=0.99,
                         help="discount of the value targets per 0.1 s step; use the one 'crossway train' will use")
+    parser.add_argument("--teacher-checkpoint", type=Path, default=None, metavar="CHECKPOINT",
+                        help="distil this trained policy instead of imitating the scripted driver: its Gaussian "
+                             "means, as 'crossway evaluate' drives it (an output ensemble's members side by side, "
+                             "its caution applied), label every car. It must have learnt from the scenario's view "
+                             "square; the --teacher-* options of the scripted driver do not apply. Default: the "
+                             "scripted driver")
     parser.add_argument("--teacher-sight", choices=("full", "view"), default="full",
                         help="full: the teacher yields to every car with priority, wherever it is; view: only to "
                              "those that may show (any part of them) in the square its views show (50 x 50 m "
@@ -163,6 +170,23 @@ def run(args) -> int:
     if (args.out / "pretrained.pt").exists():
         raise ValueError(f"{str(args.out / 'pretrained.pt')!r} exists: choose another --out, or move it away first "
                          "(nothing is overwritten)")
+    if args.teacher_checkpoint is not None:
+        from algo.policy import load_policy
+        from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S
+
+        load_policy(args.teacher_checkpoint)  # refuse a bad file before the simulator starts
+        scripted = {"--teacher-sight": args.teacher_sight != "full",
+                    "--teacher-approach-speed": args.teacher_approach_speed is not None,
+                    "--teacher-approach-signs": args.teacher_approach_signs != "all",
+                    "--teacher-brake-for-blockers": args.teacher_brake_for_blockers,
+                    "--teacher-wait-outside-zones": args.teacher_wait_outside_zones,
+                    "--teacher-break-wait-cycles": args.teacher_break_wait_cycles,
+                    "--teacher-patience": args.teacher_patience != PATIENCE_S,
+                    "--teacher-blocker-patience": args.teacher_blocker_patience != BLOCKER_PATIENCE_S,
+                    "--blocker-weight": args.blocker_weight != 1.0}
+        given = [flag for flag, changed in scripted.items() if changed]
+        if given:
+            raise ValueError(f"{', '.join(given)} shape the scripted driver; --teacher-checkpoint takes none of them")
     if args.init_from is not None:
         from algo.policy import load_policy
 
@@ -188,7 +212,7 @@ def run(args) -> int:
         brake_weight=args.brake_weight, blocker_weight=args.blocker_weight, priority_exponent=args.priority_exponent,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
         torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network,
-        standing_input=args.standing_input)
+        standing_input=args.standing_input, teacher_checkpoint=args.teacher_checkpoint)
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True))
     return 0
