@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from algo.imitation import DemonstrationBuffer, Episode, discounted_returns, imitation_loss, newest_frames
-from algo.policy import Policy, load_policy
+from algo.policy import ACTION_SCALE, Policy, load_policy
 
 
 def episode(length: int, first_value: int, rewards=None) -> Episode:
@@ -431,3 +431,49 @@ def test_pretrain_widens_the_initial_network_and_keeps_its_driving(tmp_path):
     with torch.no_grad():
         drift = max(float((a - b).abs().max()) for a, b in zip(wide(views, speeds), narrow(views, speeds)))
     assert drift < 0.2
+
+
+def test_a_policy_teacher_labels_every_car_with_its_gaussian_means(tmp_path):
+    """--teacher-checkpoint (policy distillation): the labels are the teacher's means as
+    ``crossway evaluate`` drives it, for the cars the teacher drives and the student drives alike."""
+    from evaluation.policy import PolicyDriver
+    from learner.pretrain import PretrainConfig, Pretrainer
+
+    teacher_file = "models/easy-student-guard.pt"
+    trainer = Pretrainer(PretrainConfig(scenario="easy", teacher_checkpoint=teacher_file, teacher_half_life=1.0,
+                                        torch_threads=1, seed=4))
+    teacher = PolicyDriver(trainer.sim, load_policy(teacher_file))
+    checked = 0
+    for step in range(60):
+        if step == 1:
+            trainer.by_teacher[::2] = False  # the student drives these cars' episodes from now on
+        result, present = trainer.result, np.flatnonzero(trainer.sim.learners_present)
+        expected = np.clip(teacher.act(result)[present] / ACTION_SCALE, -1.0, 1.0)
+        lengths = [len(trainer.episodes[slot].targets) for slot in present]
+        trainer.collect(1)
+        for k, slot in enumerate(present.tolist()):
+            targets = trainer.episodes[slot].targets
+            if len(targets) == lengths[k] + 1:  # the episode goes on: its newest label is this step's
+                np.testing.assert_allclose(targets[-1], expected[k], atol=1e-5)
+                checked += 1
+    assert checked > 60 and not trainer.by_teacher[present].all()  # labelled whoever drove
+    with pytest.raises(ValueError, match="teacher_sight, teacher_brake_for_blockers shape the scripted teacher"):
+        Pretrainer(PretrainConfig(scenario="easy", teacher_checkpoint=teacher_file, teacher_sight="view",
+                                  teacher_brake_for_blockers=True))
+    wide = tmp_path / "wide-views.pt"
+    state = torch.load(teacher_file, weights_only=False)
+    state["views"] = {"extent_m": 70.0, "shift_m": 15.0}
+    torch.save(state, wide)
+    with pytest.raises(ValueError, match="learnt from a 70 m view square 15 m ahead"):
+        Pretrainer(PretrainConfig(scenario="easy", teacher_checkpoint=wide))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--teacher-checkpoint", "models/easy-student-guard.pt", "--teacher-sight", "view",
+      "--teacher-patience", "2"], "--teacher-sight, --teacher-patience shape the scripted driver"),
+    (["--teacher-checkpoint", "models/nothing-here.pt"], "no checkpoint file"),
+])
+def test_pretrain_refuses_a_policy_teacher_with_scripted_options_or_no_file(tmp_path, args, message):
+    result = crossway("pretrain", "--out", str(tmp_path / "never"), *args)
+    assert result.returncode == 2 and message in result.stderr, result.stderr
+    assert not (tmp_path / "never").exists()
