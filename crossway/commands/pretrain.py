@@ -11,12 +11,15 @@ from pathlib import Path
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
-        "pretrain", help="warm-start a policy by imitating the scripted driver (not in the paper)",
+        "pretrain", help="warm-start a policy by imitating the scripted driver, or distil a trained one "
+                         "(not in the paper)",
         description="Teach the network to drive by imitating the scripted driver, which reads the right of way "
                     "from the simulator (information the network only gets through its views): every car's "
                     "observation is labelled with the driver's action, and the value heads learn the discounted "
                     "returns of the episodes driven. Episodes are driven by the teacher, then more and more by "
-                    "the network itself (DAgger). Writes OUT/pretrained.pt (also on Ctrl-C), which "
+                    "the network itself (DAgger). With --teacher-checkpoint a trained policy (such as an "
+                    "output ensemble) is the teacher instead: policy distillation. Writes OUT/pretrained.pt "
+                    "(also on Ctrl-C), which "
                     "'crossway train --init-from' and every 'crossway evaluate' take, and OUT/progress.csv. "
                     "Not part of the paper's method, which learns from rewards alone "
                     "(docs/training.md#warm-start-from-a-scripted-teacher).",
