@@ -97,6 +97,11 @@ SCRIPTED_TEACHER_FIELDS = ("teacher_sight", "teacher_approach_mps", "teacher_app
                            "teacher_patience_s", "teacher_blocker_patience_s", "blocker_weight")
 
 
+def scripted_teacher_changes(config: PretrainConfig) -> list[str]:
+    """The scripted teacher's settings (``SCRIPTED_TEACHER_FIELDS``) that ``config`` changes from their defaults."""
+    return [name for name in SCRIPTED_TEACHER_FIELDS if getattr(config, name) != getattr(PretrainConfig, name)]
+
+
 class PolicyTeacher:
     """A trained policy as the teacher (policy distillation): its Gaussian means, as ``crossway
     evaluate`` drives it (``evaluation.policy.PolicyDriver``, an ensemble's members side by side
@@ -112,7 +117,6 @@ class PolicyTeacher:
             raise ValueError(f"teacher {checkpoint} learnt from a {views[0]:g} m view square "
                              f"{views[1]:g} m ahead; scenario {sim.spec.name!r} shows {sim.spec.views.extent_m:g} m "
                              f"{sim.spec.views.shift_m:g} m ahead")
-        self.checkpoint = checkpoint
         self.driver = PolicyDriver(sim, load_policy(checkpoint))
         self.blocker_bound = np.zeros(sim.num_slots, dtype=bool)
 
@@ -163,12 +167,9 @@ class Pretrainer:
             raise ValueError(f"priority_exponent must be >= 0 (0: uniform), got {config.priority_exponent}")
         if config.average_half_life is not None and not 0.0 < config.average_half_life < float("inf"):
             raise ValueError(f"average_half_life must be > 0 Adam steps or None, got {config.average_half_life}")
-        if config.teacher_checkpoint is not None:
-            changed = [name for name in SCRIPTED_TEACHER_FIELDS
-                       if getattr(config, name) != getattr(PretrainConfig, name)]
-            if changed:
-                raise ValueError(f"{', '.join(changed)} shape the scripted teacher; a policy teacher "
-                                 f"(teacher_checkpoint) takes none of them")
+        if config.teacher_checkpoint is not None and scripted_teacher_changes(config):
+            raise ValueError(f"{', '.join(scripted_teacher_changes(config))} shape the scripted teacher; a policy "
+                             f"teacher (teacher_checkpoint) takes none of them")
         self.config = config
         torch.manual_seed(config.seed)
         torch.set_num_threads(config.torch_threads)
@@ -194,8 +195,10 @@ class Pretrainer:
         self.sim = Simulator(config.scenario, sim_config, seed=config.seed)
         if config.teacher_checkpoint is None:
             self.teacher = scripted_driver(self.sim, teacher_options)
+            self._teacher_actions = lambda result: self.teacher.act()  # it reads the simulator itself
         else:
             self.teacher = PolicyTeacher(self.sim, Path(config.teacher_checkpoint))
+            self._teacher_actions = self.teacher.act
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma, config.priority_exponent)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()
@@ -223,9 +226,7 @@ class Pretrainer:
             result = self.result
             for slot in np.flatnonzero(result.started):
                 self.by_teacher[slot] = self.rng.random() < self.teacher_probability
-            # once per step: the scripted teacher keeps each car's waiting time
-            teacher_actions = (self.teacher.act(result) if isinstance(self.teacher, PolicyTeacher)
-                               else self.teacher.act())
+            teacher_actions = self._teacher_actions(result)  # once per step: the scripted one keeps waiting times
             actions = teacher_actions.copy()
             present = np.flatnonzero(sim.learners_present)
             prioritized = self.config.priority_exponent > 0  # then the student's error is measured on every car

@@ -457,6 +457,10 @@ def test_a_policy_teacher_labels_every_car_with_its_gaussian_means(tmp_path):
                 np.testing.assert_allclose(targets[-1], expected[k], atol=1e-5)
                 checked += 1
     assert checked > 60 and not trainer.by_teacher[present].all()  # labelled whoever drove
+    from crossway.commands.pretrain import SCRIPTED_TEACHER_FLAGS
+    from learner.pretrain import SCRIPTED_TEACHER_FIELDS
+
+    assert set(SCRIPTED_TEACHER_FLAGS) == set(SCRIPTED_TEACHER_FIELDS)  # every refused setting has its flag
     with pytest.raises(ValueError, match="teacher_sight, teacher_brake_for_blockers shape the scripted teacher"):
         Pretrainer(PretrainConfig(scenario="easy", teacher_checkpoint=teacher_file, teacher_sight="view",
                                   teacher_brake_for_blockers=True))

@@ -119,6 +119,17 @@ def add_parser(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
+# the options behind learner.pretrain.SCRIPTED_TEACHER_FIELDS, for messages
+SCRIPTED_TEACHER_FLAGS = {"teacher_sight": "--teacher-sight", "teacher_approach_mps": "--teacher-approach-speed",
+                          "teacher_approach_signs": "--teacher-approach-signs",
+                          "teacher_brake_for_blockers": "--teacher-brake-for-blockers",
+                          "teacher_wait_outside_zones": "--teacher-wait-outside-zones",
+                          "teacher_break_wait_cycles": "--teacher-break-wait-cycles",
+                          "teacher_patience_s": "--teacher-patience",
+                          "teacher_blocker_patience_s": "--teacher-blocker-patience",
+                          "blocker_weight": "--blocker-weight"}
+
+
 def _network_sizes(text: str) -> tuple[int, int, int]:
     try:
         sizes = tuple(int(part) for part in text.split(","))
@@ -131,7 +142,7 @@ def _network_sizes(text: str) -> tuple[int, int, int]:
 
 
 def run(args) -> int:
-    from learner.pretrain import PretrainConfig, run_pretrain
+    from learner.pretrain import PretrainConfig, run_pretrain, scripted_teacher_changes
     from simcore.scenario import load_scenario
 
     load_scenario(args.scenario)  # a clear error for an unknown scenario before anything starts
@@ -175,21 +186,8 @@ def run(args) -> int:
                          "(nothing is overwritten)")
     if args.teacher_checkpoint is not None:
         from algo.policy import load_policy
-        from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S
 
         load_policy(args.teacher_checkpoint)  # refuse a bad file before the simulator starts
-        scripted = {"--teacher-sight": args.teacher_sight != "full",
-                    "--teacher-approach-speed": args.teacher_approach_speed is not None,
-                    "--teacher-approach-signs": args.teacher_approach_signs != "all",
-                    "--teacher-brake-for-blockers": args.teacher_brake_for_blockers,
-                    "--teacher-wait-outside-zones": args.teacher_wait_outside_zones,
-                    "--teacher-break-wait-cycles": args.teacher_break_wait_cycles,
-                    "--teacher-patience": args.teacher_patience != PATIENCE_S,
-                    "--teacher-blocker-patience": args.teacher_blocker_patience != BLOCKER_PATIENCE_S,
-                    "--blocker-weight": args.blocker_weight != 1.0}
-        given = [flag for flag, changed in scripted.items() if changed]
-        if given:
-            raise ValueError(f"{', '.join(given)} shape the scripted driver; --teacher-checkpoint takes none of them")
     if args.init_from is not None:
         from algo.policy import load_policy
 
@@ -216,6 +214,9 @@ def run(args) -> int:
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
         torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network,
         standing_input=args.standing_input, teacher_checkpoint=args.teacher_checkpoint)
+    if config.teacher_checkpoint is not None and scripted_teacher_changes(config):
+        given = [SCRIPTED_TEACHER_FLAGS[name] for name in scripted_teacher_changes(config)]
+        raise ValueError(f"{', '.join(given)} shape the scripted driver; --teacher-checkpoint takes none of them")
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True))
     return 0
