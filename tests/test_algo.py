@@ -271,17 +271,18 @@ def test_matrix_form_of_the_network_matches_the_modules():
             torch.testing.assert_close(values[b], torch.stack([v_acc, v_sa], 1), atol=1e-5, rtol=1e-4)
 
 
-@pytest.mark.parametrize("terminal, max_grad_norm, cost, sigma, lam", [
-    (False, 1e9, 0.0, 0.4, 1.0), (True, 1e9, 0.0, 0.4, 1.0), (False, 0.5, 0.0, 0.4, 1.0),
-    (False, 1e9, 0.3, (0.15, 0.4), 1.0), (False, 1e9, 0.0, 0.4, 0.8)])
-def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max_grad_norm, cost, sigma, lam):
+@pytest.mark.parametrize("terminal, max_grad_norm, cost, sigma, lam, local_lr", [
+    (False, 1e9, 0.0, 0.4, 1.0, 0.01), (True, 1e9, 0.0, 0.4, 1.0, 0.01), (False, 0.5, 0.0, 0.4, 1.0, 0.01),
+    (False, 1e9, 0.3, (0.15, 0.4), 1.0, 0.01), (False, 1e9, 0.0, 0.4, 0.8, 0.01), (False, 1e9, 0.0, 0.05, 1.0, 0.0)])
+def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max_grad_norm, cost, sigma, lam,
+                                                                   local_lr):
     """The update that reuses acting's first layer gives autograd's gradient on the whole segment,
     clipping, the acceleration cost and per-head sigmas included, and moves the local weights by
-    -lr times it."""
+    -lr times it (not at all with a local step of 0, which still sums the gradient)."""
     rng = np.random.default_rng(1)
     torch.manual_seed(1)
     policy = Policy()
-    config = DA3CConfig(update_interval=6, max_grad_norm=max_grad_norm, local_learning_rate=0.01,
+    config = DA3CConfig(update_interval=6, max_grad_norm=max_grad_norm, local_learning_rate=local_lr,
                         acceleration_cost=cost, gae_lambda=lam)
     n = 5
     sigmas = (sigma, sigma) if isinstance(sigma, float) else sigma
@@ -314,7 +315,8 @@ def test_local_update_gradient_matches_autograd_through_the_policy(terminal, max
     torch.nn.utils.clip_grad_norm_(list(leaves.values()), max_grad_norm)
     for name, leaf in leaves.items():
         torch.testing.assert_close(learner.grad_sum[name], leaf.grad, atol=1e-5, rtol=1e-3)
-        torch.testing.assert_close(params[name], start[name] - 0.01 * leaf.grad, atol=1e-6, rtol=1e-4)
+        torch.testing.assert_close(params[name], start[name] - local_lr * leaf.grad, atol=1e-6, rtol=1e-4)
+    assert any(float(g.abs().max()) > 0 for g in learner.grad_sum.values())
     if max_grad_norm < 1:
         total = math.sqrt(sum(float(g.square().sum()) for g in learner.grad_sum.values()))
         assert total == pytest.approx(max_grad_norm, rel=1e-4)

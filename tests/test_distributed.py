@@ -202,6 +202,7 @@ def test_train_stopped_while_the_learner_is_still_starting_exits_cleanly(tmp_pat
                                           (("--noise-correlation", "1.0"), "--noise-correlation must be in [0, 1)"),
                                           (("--acceleration-cost", "-1"), "--acceleration-cost must be >= 0"),
                                           (("--value-coef", "0"), "--value-coef must be > 0"),
+                                          (("--local-learning-rate", "-0.001"), "--local-learning-rate must be >= 0"),
                                           (("--gamma", "1.5"), "--gamma must be in (0, 1]"),
                                           (("--gamma", "0"), "--gamma must be in (0, 1]"),
                                           (("--gae-lambda", "-0.1"), "--gae-lambda must be in [0, 1]"),
@@ -442,10 +443,13 @@ def test_actor_options_reach_the_agents_config():
     from crossway.commands.distributed import actor_config
 
     args = build_parser().parse_args(["actor", "--scenario", "hard", "--gamma", "0.998", "--noise-correlation", "0.9",
-                                      "--acceleration-cost", "0.01", "--value-coef", "2", "--gae-lambda", "0.9"])
+                                      "--acceleration-cost", "0.01", "--value-coef", "2", "--gae-lambda", "0.9",
+                                      "--local-learning-rate", "0"])
     config = actor_config(args, ("tcp/127.0.0.1:7447",), None, 0, "a", None)
     assert (config.da3c.gamma, config.da3c.noise_correlation) == (0.998, 0.9)
     assert (config.da3c.acceleration_cost, config.da3c.value_coef, config.da3c.gae_lambda) == (0.01, 2.0, 0.9)
+    assert config.da3c.local_learning_rate == 0.0
     default = actor_config(build_parser().parse_args(["actor"]), ("tcp/127.0.0.1:7447",), None, 0, "a", None)
     assert default.da3c.gamma == 0.99  # the paper gives no discount; ours stays the default
     assert default.da3c.gae_lambda == 1.0  # the paper's advantage
+    assert default.da3c.local_learning_rate == 1e-3

@@ -84,6 +84,12 @@ def _add_actor_options(parser: argparse.ArgumentParser) -> None:
                              "the paper's A = R - v; lower leans on the critic (less variance, more bias)")
     parser.add_argument("--value-coef", type=float, default=0.5, metavar="COEF",
                         help="weight of the value losses against the policy losses in each local update")
+    parser.add_argument("--local-learning-rate", type=float, default=1e-3, metavar="LR",
+                        help="SGD step of each agent's local copy at its updates during the episode (the "
+                             "'delayed' part of D-A3C), >= 0. 0 drives the whole episode on the weights it "
+                             "started from. Lower it to fine-tune a trained policy at a small --sigma-start: "
+                             "the local gradient scales as 1/sigma^2, and at sigma 0.05 the default step "
+                             "alone halves a hard student's reach within its episodes (docs/training.md)")
     parser.add_argument("--acceleration-cost", type=float, default=0.0, metavar="COEF",
                         help="weight of a cost on the squared acceleration mean per step (not in the paper; 0: "
                              "off); keeps the mean near 'hold' at the speed cap instead of full throttle, so "
@@ -221,6 +227,8 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         raise ValueError(f"--gae-lambda must be in [0, 1], got {args.gae_lambda}")
     if not args.acceleration_cost >= 0.0:
         raise ValueError(f"--acceleration-cost must be >= 0, got {args.acceleration_cost}")
+    if not args.local_learning_rate >= 0.0:
+        raise ValueError(f"--local-learning-rate must be >= 0, got {args.local_learning_rate}")
     if yield_drill:
         if load_scenario(args.scenario).name != "hard":
             raise ValueError(f"the yield drill runs on the hard junction (the TTC test's arms), not {args.scenario!r}")
@@ -236,7 +244,8 @@ def actor_config(args, connect: tuple[str, ...], lanes: tuple[str, ...] | None, 
         actor_id=actor_id, seed=seed, sim=sim, episode_label=episode_label,
         da3c=DA3CConfig(update_interval=args.update_interval, noise_correlation=args.noise_correlation,
                         acceleration_cost=args.acceleration_cost, value_coef=args.value_coef,
-                        gamma=args.gamma, gae_lambda=args.gae_lambda),
+                        gamma=args.gamma, gae_lambda=args.gae_lambda,
+                        local_learning_rate=args.local_learning_rate),
     )
 
 
