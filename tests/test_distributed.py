@@ -2,6 +2,7 @@
 endpoints): weights out, gradients in, actors dying, the learner restarting, the CLI."""
 
 import csv
+import os
 import signal
 import socket
 import subprocess
@@ -453,3 +454,31 @@ def test_actor_options_reach_the_agents_config():
     assert default.da3c.gamma == 0.99  # the paper gives no discount; ours stays the default
     assert default.da3c.gae_lambda == 1.0  # the paper's advantage
     assert default.da3c.local_learning_rate == 1e-3
+
+
+def test_train_stopped_by_sigterm_stops_its_learner_and_actors(tmp_path):
+    """kill/pkill on the launcher ends the whole run: no learner or actor is left driving."""
+    run_dir, log_path = tmp_path / "run", tmp_path / "train.log"
+    with open(log_path, "w") as log:
+        launcher = subprocess.Popen(
+            [sys.executable, "-m", "crossway", "train", "--scenario", "easy", "--actors", "2", "--minutes", "5",
+             "--run-dir", str(run_dir), "--metrics-port", "0"],
+            stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while "driving" not in log_path.read_text() and time.monotonic() < deadline:
+            time.sleep(0.5)
+        assert "driving" in log_path.read_text()
+        launcher.send_signal(signal.SIGTERM)
+        assert launcher.wait(timeout=180) == 0
+        text = log_path.read_text()
+        assert "train: interrupted" in text and "learner: stopped at version" in text
+        left = subprocess.run(["ps", "-o", "pid,stat,args", "-g", str(launcher.pid)], capture_output=True, text=True)
+        running = [line for line in left.stdout.splitlines()[1:] if line.split()[1][0] != "Z"]
+        assert not running, left.stdout  # nothing of the run's session is left running (zombies await init)
+        assert list((run_dir / "checkpoints").glob("ckpt-*.pt"))
+    finally:
+        try:
+            os.killpg(launcher.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass

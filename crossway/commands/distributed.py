@@ -143,7 +143,7 @@ def add_parser(subparsers) -> None:
     train = subparsers.add_parser(
         "train", help="train on this machine: a learner and N actors", formatter_class=fmt,
         description="Start a learner and N actor processes on this machine, connected over Zenoh on "
-                    "loopback; show a live progress line; stop after --minutes or on Ctrl-C, leaving a "
+                    "loopback; show a live progress line; stop after --minutes or on Ctrl-C or SIGTERM, leaving a "
                     "checkpoint in --run-dir. Running it again with the same --run-dir resumes.")
     train.add_argument("--actors", type=int, default=max(1, (os.cpu_count() or 2) - 1),
                        help="actor processes (each uses one core)")
@@ -378,7 +378,10 @@ def run_train_command(args) -> int:
         nonlocal interrupted
         interrupted = True
 
+    # SIGTERM (kill, pkill, a scheduler) stops the run as Ctrl-C does: without it the launcher died
+    # alone and left its learner and actors running
     previous = signal.signal(signal.SIGINT, on_sigint)
+    previous_term = signal.signal(signal.SIGTERM, on_sigint)
     progress_path = args.run_dir / "progress.csv"
     new_file = not progress_path.exists()
     started = time.monotonic()
@@ -436,6 +439,7 @@ def run_train_command(args) -> int:
     if interactive:
         print(file=sys.stderr)
     signal.signal(signal.SIGINT, previous)
+    signal.signal(signal.SIGTERM, previous_term)
     actors_failed = not interrupted and learner.is_alive() and not any(process.is_alive() for process in actors)
     reason = ("interrupted" if interrupted else "learner exited" if not learner.is_alive()
               else "every actor exited (their messages are above)" if actors_failed else "time is up")
