@@ -167,9 +167,10 @@ class Pretrainer:
             raise ValueError(f"priority_exponent must be >= 0 (0: uniform), got {config.priority_exponent}")
         if config.average_half_life is not None and not 0.0 < config.average_half_life < float("inf"):
             raise ValueError(f"average_half_life must be > 0 Adam steps or None, got {config.average_half_life}")
-        if config.teacher_checkpoint is not None and scripted_teacher_changes(config):
-            raise ValueError(f"{', '.join(scripted_teacher_changes(config))} shape the scripted teacher; a policy "
-                             f"teacher (teacher_checkpoint) takes none of them")
+        changed = scripted_teacher_changes(config)
+        if config.teacher_checkpoint is not None and changed:
+            raise ValueError(f"{', '.join(changed)} shape the scripted teacher; a policy teacher "
+                             f"(teacher_checkpoint) takes none of them")
         self.config = config
         torch.manual_seed(config.seed)
         torch.set_num_threads(config.torch_threads)

@@ -214,9 +214,10 @@ def run(args) -> int:
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
         torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network,
         standing_input=args.standing_input, teacher_checkpoint=args.teacher_checkpoint)
-    if config.teacher_checkpoint is not None and scripted_teacher_changes(config):
-        given = [SCRIPTED_TEACHER_FLAGS[name] for name in scripted_teacher_changes(config)]
-        raise ValueError(f"{', '.join(given)} shape the scripted driver; --teacher-checkpoint takes none of them")
+    changed = scripted_teacher_changes(config)
+    if config.teacher_checkpoint is not None and changed:
+        given = ", ".join(SCRIPTED_TEACHER_FLAGS[name] for name in changed)
+        raise ValueError(f"{given} shape the scripted driver; --teacher-checkpoint takes none of them")
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True))
     return 0
