@@ -6,6 +6,8 @@ Stateless: kill it at any time and start another. Wiring:
 - weights key publications -> latest payload slot (Zenoh thread) -> decoded between steps
 - ``ActorCore.step`` finished episodes -> ``GradientPush`` -> gradients key (congestion BLOCK)
 - liveliness token on actors/<id> while alive; ``ActorHello`` heartbeat every few seconds
+- no weights for ``learner_silence_s`` (the learner republishes every few seconds, changed or not):
+  the learner is gone, so stop driving (nothing would receive the gradients) and wait for one again
 """
 
 from __future__ import annotations
@@ -48,6 +50,8 @@ class ActorServiceConfig:
     # the scenario label of this actor's episodes in the learner's metrics (default: the scenario's
     # name); the yield drill's say "hard-yield-drill", so its crash rate can be read on its own
     episode_label: str = ""
+    # no weights publication for this long: the learner is gone; pause and wait for it [s]
+    learner_silence_s: float = 60.0
 
 
 class ActorService:
@@ -63,6 +67,7 @@ class ActorService:
         views = self.sim.spec.views
         self.views = (views.extent_m, views.shift_m)  # [m] reported with every push
         self._latest_weights: bytes | None = None
+        self._last_weights_at = time.monotonic()  # when the newest publication arrived (Zenoh thread) [s]
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self.episodes = 0
@@ -74,6 +79,7 @@ class ActorService:
     def _on_weights(self, sample: zenoh.Sample) -> None:
         with self._lock:
             self._latest_weights = sample.payload.to_bytes()
+            self._last_weights_at = time.monotonic()
 
     def _apply_weights(self, payload: bytes) -> bool:
         try:
@@ -128,6 +134,14 @@ class ActorService:
             self.log(f"actor {self.actor_id}: stopping: {error}")
             return EXIT_VIEWS_MISMATCH
 
+    def _wait_for_learner(self, session: zenoh.Session) -> bool:
+        """Ask for the learner's weights every second until it answers; False if stopped first."""
+        while not self._stop.is_set() and not self.fetch_weights(session):
+            self._stop.wait(1.0)  # no learner yet: ask again in a second
+        with self._lock:
+            self._last_weights_at = time.monotonic()
+        return not self._stop.is_set()
+
     def _run(self) -> int:
         cfg = self.config
         run = cfg.run_name
@@ -137,20 +151,19 @@ class ActorService:
             hello_key = keys.hello(run, self.actor_id)
             self.log(f"actor {self.actor_id}: {cfg.scenario}, waiting for the learner's weights "
                      f"({list(cfg.transport.connect) or list(cfg.transport.listen)})")
-            while not self._stop.is_set() and not self.fetch_weights(session):
-                self._stop.wait(1.0)  # no learner yet: ask again in a second
-            if self._stop.is_set():
-                return 0
-            self.log(f"actor {self.actor_id}: got weights version {self.core.version}, driving")
-            self.core.reset()
-            last_hello = 0.0
             try:
+                if not self._wait_for_learner(session):
+                    return 0
+                self.log(f"actor {self.actor_id}: got weights version {self.core.version}, driving")
+                self.core.reset()
+                last_hello = 0.0
                 while not self._stop.is_set():
                     for episode in self.core.step():
                         self.push(session, episode)
                         self.episodes += 1
                     with self._lock:
                         payload, self._latest_weights = self._latest_weights, None
+                        silent_s = time.monotonic() - self._last_weights_at
                     if payload is not None:
                         self._apply_weights(payload)
                     now = time.monotonic()
@@ -159,6 +172,16 @@ class ActorService:
                         last_hello = now
                     if cfg.max_episodes and self.episodes >= cfg.max_episodes:
                         break
+                    if silent_s > cfg.learner_silence_s:
+                        # the learner is gone (it republishes every few seconds): gradients would
+                        # go nowhere, so stop driving until a learner answers again
+                        self.log(f"actor {self.actor_id}: no weights from the learner for {silent_s:.0f} s; "
+                                 "pausing until it answers")
+                        if not self._wait_for_learner(session):
+                            break
+                        self.log(f"actor {self.actor_id}: the learner answered at version "
+                                 f"{self.core.version}; driving again")
+                        self.core.reset()  # episodes begun before the pause are dropped
             finally:
                 subscriber.undeclare()
                 token.undeclare()

@@ -10,15 +10,19 @@ Wiring (one comment per connection):
 - actors' liveliness tokens -> live-actor gauge
 - main thread -> status key, about once a second (``crossway train``'s progress line)
 - main thread -> run_dir/checkpoints, every ``checkpoint_interval_s`` and on SIGTERM/SIGINT
+- run_dir/learner.lock, locked (flock) for the service's life: a second learner on the same run
+  directory is refused instead of overwriting the first one's checkpoints
 - metrics registry -> HTTP /metrics on ``metrics_port``
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
 import queue
 import re
 import signal
+import socket
 import sys
 import threading
 import time
@@ -69,6 +73,42 @@ class LearnerServiceConfig:
     init_from: Path | None = None  # weights for a new run (checkpoint or exported policy); unused on resume
 
 
+LOCK_NAME = "learner.lock"
+
+
+class RunDirInUse(ValueError):
+    """Another live process holds the run directory's lock."""
+
+
+def lock_run_dir(run_dir: Path):
+    """Lock ``run_dir`` for this process: an open file holding an exclusive ``flock``.
+
+    The lock goes with the file's closing or the process's death (a killed learner leaves no
+    stale lock). The file names its holder, for the refusal's message. Raises ``RunDirInUse``.
+    flock is reliable on local file systems; on NFS it depends on the server.
+    """
+    run_dir.mkdir(parents=True, exist_ok=True)
+    handle = open(run_dir / LOCK_NAME, "a+")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.seek(0)
+        holder = handle.read().strip() or "a process that has not written its name yet"
+        handle.close()
+        raise RunDirInUse(f"run directory {run_dir} is in use by another learner ({holder}); stop that one "
+                          "first or give another run directory") from None
+    handle.truncate(0)
+    handle.write(f"pid {os.getpid()} on {socket.gethostname()} since {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
+    handle.flush()
+    return handle
+
+
+def check_run_dir_free(run_dir: Path) -> None:
+    """Raise ``RunDirInUse`` if a learner holds ``run_dir`` now (a launcher's check before it starts one)."""
+    if (run_dir / LOCK_NAME).exists():
+        lock_run_dir(run_dir).close()
+
+
 def newest_checkpoint(run_dir: Path) -> Path | None:
     directory = run_dir / "checkpoints"
     if not directory.is_dir():
@@ -110,7 +150,7 @@ class LearnerService:
         self.core = LearnerCore(config.learner)
         self.metrics = LearnerMetrics()
         self.run_id = uuid.uuid4().hex[:12]
-        config.run_dir.mkdir(parents=True, exist_ok=True)
+        self._run_dir_lock = lock_run_dir(config.run_dir)  # before reading or writing any checkpoint
         checkpoint = newest_checkpoint(config.run_dir)
         resumed_episodes = 0
         if checkpoint is not None:
@@ -161,6 +201,11 @@ class LearnerService:
 
     def stop(self, *_args) -> None:
         self._stop.set()
+
+    def close(self) -> None:
+        """Give up the run directory (``run`` does on its way out)."""
+        if not self._run_dir_lock.closed:
+            self._run_dir_lock.close()
 
     def weights_payload(self) -> bytes:
         """Encoded newest weights, encoded once per version."""
@@ -293,6 +338,7 @@ class LearnerService:
                 self.log(f"learner: stopped at version {self.core.version}; checkpoint {path}")
                 for entity in (subscriber, liveliness, queryable, weights_publisher, status_publisher):
                     entity.undeclare()
+                self.close()
         return 0
 
 
@@ -309,5 +355,5 @@ def run_learner(config: LearnerServiceConfig, stop_requested=lambda: False) -> i
     return service.run()
 
 
-__all__ = ["LearnerService", "LearnerServiceConfig", "newest_checkpoint", "run_learner",
-           "write_checkpoint"]
+__all__ = ["LearnerService", "LearnerServiceConfig", "RunDirInUse", "check_run_dir_free", "lock_run_dir",
+           "newest_checkpoint", "run_learner", "write_checkpoint"]

@@ -307,6 +307,7 @@ def test_a_new_run_starts_from_given_weights_and_a_resumed_run_ignores_them(tmp_
     for name, weights in source.weights().items():
         np.testing.assert_array_equal(service.core.weights()[name], weights)
     assert any("starting from the weights in" in line for line in logs)
+    service.close()  # it never ran: give up the run directory's lock by hand
     # a run directory with a checkpoint resumes from it, not from --init-from
     resumed = LearnerCore(seed=3)
     resumed.version = 42
@@ -377,6 +378,7 @@ def test_a_resumed_run_goes_on_with_its_episode_count_and_rolling_reach_rate(tmp
     before = first.status()
     assert before.episodes == 250 and 0.0 < before.reach_rate < 1.0
     first.checkpoint()
+    first.close()
     second = LearnerService(config, log=lambda line: None)
     after = second.status()
     assert after.episodes == 250
@@ -403,6 +405,7 @@ def test_the_learner_keeps_a_reach_rate_per_scenario_label_across_a_resume(tmp_p
              for s in metric.samples}
     assert gauge == {"hard": 0.75, "hard-yield-drill": 0.5}
     first.checkpoint()
+    first.close()
     second = LearnerService(config, log=lambda line: None)
     assert second.status().reach_by_scenario == {"hard": 0.75, "hard-yield-drill": 0.5}
 
@@ -482,3 +485,77 @@ def test_train_stopped_by_sigterm_stops_its_learner_and_actors(tmp_path):
             os.killpg(launcher.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+
+
+def test_a_second_learner_on_the_same_run_dir_is_refused_until_the_first_is_gone(tmp_path):
+    """Two learners writing one run directory would overwrite each other's checkpoints."""
+    from learner.service import RunDirInUse, check_run_dir_free
+
+    first = learner_process(tmp_path, f"tcp/127.0.0.1:{free_port()}")
+    try:
+        wait_for(lambda: (tmp_path / "learner.lock").exists()
+                 and f"pid {first.pid}" in (tmp_path / "learner.lock").read_text(), 60, "the first learner's lock")
+        second = subprocess.run(
+            [sys.executable, "-m", "crossway", "learner", "--run-dir", str(tmp_path), "--listen",
+             f"tcp/127.0.0.1:{free_port()}", "--metrics-port", "0"], capture_output=True, text=True, timeout=60)
+        assert second.returncode == 2
+        assert f"is in use by another learner (pid {first.pid} on" in second.stderr
+        train = subprocess.run(
+            [sys.executable, "-m", "crossway", "train", "--scenario", "easy", "--actors", "1", "--minutes", "0.1",
+             "--run-dir", str(tmp_path), "--metrics-port", "0"], capture_output=True, text=True, timeout=60)
+        assert train.returncode == 2 and "is in use by another learner" in train.stderr
+        assert not (tmp_path / "progress.csv").exists()  # refused before it wrote anything
+        with pytest.raises(RunDirInUse):
+            check_run_dir_free(tmp_path)
+        first.send_signal(signal.SIGKILL)  # a learner that dies without cleaning up leaves no stale lock
+        first.wait(timeout=30)
+        check_run_dir_free(tmp_path)
+    finally:
+        stop(first)
+
+
+def test_an_actor_pauses_while_no_learner_publishes_and_drives_again_for_a_new_one(tmp_path):
+    """No weights for --learner-timeout: the actor stops pushing gradients into nothing and waits."""
+    learner_endpoint, watch_endpoint = (f"tcp/127.0.0.1:{free_port()}" for _ in range(2))
+
+    def start_learner(run_dir: Path):
+        service = LearnerService(LearnerServiceConfig(
+            run_dir=run_dir, transport=TransportConfig(listen=(learner_endpoint,)), metrics_port=0,
+            checkpoint_interval_s=3600, publish_interval_s=0.2), log=lambda _: None)
+        thread = threading.Thread(target=service.run, daemon=True)
+        thread.start()
+        return service, thread
+
+    pushes: list[float] = []  # arrival times of the actor's gradient pushes, seen by a watcher
+    with open_session(TransportConfig(listen=(watch_endpoint,))) as watcher:
+        watcher.declare_subscriber(keys.gradients("default"), lambda _: pushes.append(time.monotonic()))
+        first, first_thread = start_learner(tmp_path / "a")
+        actor = start_actor(f"{learner_endpoint},{watch_endpoint}", "patient", "--learner-timeout", "2")
+        lines: list[str] = []
+        reader = threading.Thread(target=lambda: lines.extend(actor.stderr), daemon=True)
+        reader.start()
+        try:
+            wait_for(lambda: first.pushes_by_actor.get("patient", 0) >= 2 and pushes, 120, "pushes to both")
+            first.stop()
+            first_thread.join(timeout=30)
+            wait_for(lambda: any("pausing until it answers" in line for line in lines), 60, "the actor to pause")
+            paused_at = time.monotonic()
+            time.sleep(4.0)
+            assert not [t for t in pushes if t > paused_at]  # nothing pushed while no learner is there
+            assert actor.poll() is None
+            second, second_thread = start_learner(tmp_path / "b")
+            try:
+                wait_for(lambda: second.pushes_by_actor.get("patient", 0) >= 1, 120, "pushes to the new learner")
+                assert any("driving again" in line for line in lines)
+            finally:
+                second.stop()
+                second_thread.join(timeout=30)
+        finally:
+            stop(actor)
+            first.stop()
+
+
+def test_an_actor_refuses_a_learner_timeout_that_is_not_positive():
+    result = subprocess.run([sys.executable, "-m", "crossway", "actor", "--learner-timeout", "0",
+                             "--connect", f"tcp/127.0.0.1:{free_port()}"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "--learner-timeout must be > 0" in result.stderr

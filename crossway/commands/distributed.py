@@ -126,6 +126,10 @@ def add_parser(subparsers) -> None:
                        help="drive the yield drill instead of the scenario (hard only): learners start from "
                             "the stop-sign arm and must give way to IDM traffic on the two adjacent arms, "
                             "as in the TTC test (docs/training.md)")
+    actor.add_argument("--learner-timeout", type=float, default=60.0, metavar="SECONDS",
+                       help="pause driving when no weights have come from the learner for this long (it "
+                            "republishes them every 5 s, so it is gone) and wait for a learner to answer "
+                            "again: gradients pushed with no learner to take them are lost work")
     _add_common(actor)
     _add_actor_options(actor)
     _add_tls(actor)
@@ -261,11 +265,16 @@ def run_actor_command(args) -> int:
     from protocol.transport import parse_endpoints
 
     lanes = tuple(x for x in args.lanes.split(",") if x) or None
+    if not args.learner_timeout > 0:
+        raise ValueError(f"--learner-timeout must be > 0 seconds, got {args.learner_timeout}")
     if args.yield_drill and args.delay_max is not None:
         raise ValueError("the yield drill sets its own waits (0-2 s for learners, 0-40 s for traffic): "
                          "leave out --delay-max")
-    return run_actor(actor_config(args, parse_endpoints(args.connect), lanes, args.seed, args.id, args.delay_max,
-                                  yield_drill=args.yield_drill))
+    from dataclasses import replace
+
+    config = actor_config(args, parse_endpoints(args.connect), lanes, args.seed, args.id, args.delay_max,
+                          yield_drill=args.yield_drill)
+    return run_actor(replace(config, learner_silence_s=args.learner_timeout))
 
 
 def run_router_command(args) -> int:
@@ -332,6 +341,7 @@ def run_train_command(args) -> int:
 
     from protocol import keys
     from protocol.messages import DecodeError, LearnerStatus, decode
+    from learner.service import check_run_dir_free
     from protocol.transport import TransportConfig, open_session
     from simcore.scenario import build_intersection, load_scenario
 
@@ -348,6 +358,7 @@ def run_train_command(args) -> int:
     if args.curriculum == "single" and delay_max is None:
         delay_max = 0.0  # alone on the road: no reason to wait
     learner_cfg = learner_config(args, (endpoint,), ())
+    check_run_dir_free(args.run_dir)  # a learner already on it: refuse before progress.csv is touched
     check_resumed_views(args.run_dir, load_scenario(args.scenario))
     actor_cfgs = []
     for i in range(args.actors):
