@@ -98,6 +98,19 @@ def test_crash_kinds_counts_every_episode_with_the_scripted_driver_and_with_a_po
         assert len(report["cars_standing_at_each_time_over"]) == report["outcomes"].get("time_over", 0)
         assert all(0 <= n <= 16 for n in report["cars_standing_at_each_time_over"])
         assert sum(report["crash_pairs"].values()) <= report["outcomes"].get("crash", 0)
+        # the state before each entry of a car without priority into the zone, one per such crash
+        assert len(report["at_that_entry"]) == report["lower_car_entered_the_zone_first"]
+        assert all(entry["lower_gap_m"] >= 0.0 and entry["upper_gap_m"] >= 0.0 for entry in report["at_that_entry"])
+
+
+def test_crash_kinds_drives_the_hard_teacher_with_its_options():
+    report = _run_script("crash_kinds.py", "--scenario", "hard", "--episodes", "20", "--delay-max", "5",
+                         "--approach-speed", "2", "--brake-for-blockers", "--wait-outside-zones",
+                         "--break-wait-cycles", "--patience", "inf")
+    driver = report["driver"]
+    assert driver["scripted_wait_outside_zones"] and driver["scripted_break_wait_cycles"]
+    assert driver["scripted_patience_s"] == "never" and driver["scripted_approach_mps"] == 2.0
+    assert sum(report["outcomes"].values()) == report["episodes"] >= 20
 
 
 def test_waiting_cars_prints_the_road_for_a_policy_too():

@@ -30,7 +30,8 @@ def add_parser(subparsers) -> None:
         help="animate a scenario driven by scripted drivers (GIF or MP4)",
         description=textwrap.fill(
             "Simulate a scenario with every car driven by the scripted path-following driver "
-            "(no trained model needed) and write an animation. Left: the whole junction in the "
+            "(no trained model needed) or, with --checkpoint, by a trained policy, and write an "
+            "animation. Left: the whole junction in the "
             "paper's colours: grey roads, red stop lines, yellow yield lines, green learning cars, "
             "the focus agent's route (faint green) and the 50 x 50 m square it perceives (green "
             "outline). Right: that agent's four 84x84 semantic views (navigable, path, obstacles, "

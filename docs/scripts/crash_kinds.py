@@ -1,7 +1,8 @@
 """What the view-limited scripted driver's crashes look like (docs/training.md, session 14).
 
     python docs/scripts/crash_kinds.py [--scenario easy] [--delay-max 10] [--episodes 600] [--seed 11]
-        [--approach-speed 1] [--approach-signs own] [--brake-for-blockers] [--checkpoint CKPT]
+        [--approach-speed 1] [--approach-signs own] [--brake-for-blockers] [--wait-outside-zones]
+        [--break-wait-cycles] [--patience 4] [--checkpoint CKPT]
 
 Drives the scenario's Table I set-up (delay_min 0) with the scripted driver limited to the views,
 or with the trained policy ``--checkpoint`` (Gaussian means, as ``crossway evaluate``), and, for
@@ -9,6 +10,8 @@ every pair of cars that crash into each other, records the kind of the pair (sam
 merging, crossing), which one had priority, both speeds at the impact, and whether the car
 without priority had entered their conflict zone (its front past the zone's start) while the car
 with priority was still outside it: then the car with priority ran into a car already in its way.
+For those, at the last step before that entry: the lower car's speed, the gap from its front to the
+zone and the acceleration it was commanded, and the car with priority's speed and gap to its zone.
 At each time-over it counts the cars standing (under 0.5 m/s) on the road at that step, those
 that ran out of time included.
 Prints one JSON object.
@@ -42,6 +45,9 @@ def main() -> None:
     parser.add_argument("--approach-speed", type=float, default=1.0, help="[m/s]; 0 or less: no approach rule")
     parser.add_argument("--approach-signs", choices=("all", "own"), default="own")
     parser.add_argument("--brake-for-blockers", action="store_true")
+    parser.add_argument("--wait-outside-zones", action="store_true")
+    parser.add_argument("--break-wait-cycles", action="store_true")
+    parser.add_argument("--patience", type=float, default=4.0, help="[s]; inf: never stop yielding")
     add_checkpoint_argument(parser)
     args = parser.parse_args()
 
@@ -49,7 +55,9 @@ def main() -> None:
                     seed=args.seed)
     result = sim.reset()
     options = DriverOptions(sight="view", approach_speed_mps=args.approach_speed if args.approach_speed > 0 else None,
-                            approach_signs=args.approach_signs, brake_for_blockers=args.brake_for_blockers)
+                            approach_signs=args.approach_signs, brake_for_blockers=args.brake_for_blockers,
+                            wait_outside_zones=args.wait_outside_zones, break_wait_cycles=args.break_wait_cycles,
+                            patience_s=args.patience)
     driver = ScriptDriver(sim, options, args.checkpoint)
     entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])
     outcomes: collections.Counter = collections.Counter()
@@ -57,14 +65,17 @@ def main() -> None:
     crossing_with_priority = 0
     speeds: list[tuple[float, float]] = []  # (car without, car with priority) at impact [m/s]
     lower_first: list[float] = []  # time from the lower car's entry into the zone to the impact [s]
-    history: collections.deque = collections.deque(maxlen=HISTORY_STEPS)  # arc lengths s of the last steps
+    at_entry: list[dict] = []  # both cars at the last step before the lower car's entry
+    # (arc lengths s, speeds, commanded accelerations) of the last steps
+    history: collections.deque = collections.deque(maxlen=HISTORY_STEPS)
     half = 0.5 * VEHICLE_LENGTH
     standing_at_time_over: list[int] = []
     done = 0
     while done < args.episodes:
         routes, s, signs = sim.route.copy(), sim.s.copy(), sim.sign.copy()  # before the step
-        history.append(s)
-        result = sim.step(driver.act(result))
+        actions = driver.act(result)
+        history.append((s, sim.speed.copy(), actions[:, 0].copy()))
+        result = sim.step(actions)
         for episode in result.episodes:
             if episode.end_reason in OUTCOMES:
                 outcomes[episode.end_reason] += 1
@@ -97,16 +108,23 @@ def main() -> None:
                     # where was the car with priority when the other one's front entered their zone?
                     zone_lower = sim.priority.zone_start[routes[lower], routes[upper]]
                     zone_upper = sim.priority.zone_start[routes[upper], routes[lower]]
-                    for back, past in enumerate(reversed(history)):
+                    for back, (past, speed, acceleration) in enumerate(reversed(history)):
                         if past[lower] + half < zone_lower:  # the step before it entered
                             if back > 0 and past[upper] + half < zone_upper:
                                 lower_first.append(back * DT)
+                                at_entry.append({
+                                    "lower_speed_mps": round(float(speed[lower]), 1),
+                                    "lower_gap_m": round(float(zone_lower - past[lower] - half), 2),
+                                    "lower_acceleration_mps2": round(float(acceleration[lower]), 2),
+                                    "upper_speed_mps": round(float(speed[upper]), 1),
+                                    "upper_gap_m": round(float(zone_upper - past[upper] - half), 1)})
                             break
     print(json.dumps({"scenario": args.scenario, "delay_max_s": args.delay_max, "episodes": done,
                       "seed": args.seed, "driver": driver.record(), "outcomes": dict(outcomes),
                       "crash_pairs": dict(kinds), "crossing_pairs_with_a_priority": crossing_with_priority,
                       "lower_car_entered_the_zone_first": len(lower_first),
                       "seconds_from_that_entry_to_impact": sorted(round(x, 1) for x in lower_first),
+                      "at_that_entry": at_entry,
                       "impact_speeds_mps_lower_upper": [(round(a, 1), round(b, 1)) for a, b in speeds],
                       "cars_standing_at_each_time_over": sorted(standing_at_time_over)}))
 
