@@ -4,18 +4,26 @@ The workers never outlive the command: SIGTERM (a scheduler's stop, ``kill``) an
 the pool before the command exits, and a worker whose parent died anyway (SIGKILL, a crash)
 notices within ``ORPHAN_CHECK_S`` and exits, instead of driving its chunk to the end on a
 core nobody is waiting for.
+
+Nothing finished is lost: with a ``cache_dir`` every job's result is kept there as soon as it
+returns, and the same command run again (same jobs, same checkpoint file) takes those results
+instead of running the jobs again. The caller removes the folder once its outputs are written.
 """
 
 from __future__ import annotations
 
+import hashlib
 import multiprocessing
 import os
+import pickle
 import queue
+import shutil
 import signal
 import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 BAR_WIDTH = 30  # characters of the progress bar
 ORPHAN_CHECK_S = 1.0  # how often a worker checks that the command that started it still runs [s]
@@ -44,32 +52,123 @@ def _stop_on_sigterm(*_) -> None:
     raise SystemExit(128 + signal.SIGTERM)  # unwinds the pool's context: its workers are terminated
 
 
-def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers: int, label: str) -> list:
+def job_key(function: Callable, job: tuple, salt: str = "") -> str:
+    """A job's name in a cache folder: the function, the job's arguments (their ``repr``: every
+    job argument is a dataclass, tuple or plain value) and ``salt`` (e.g. the checkpoint's digest)."""
+    text = f"{function.__module__}.{function.__qualname__}\n{salt}\n{job!r}"
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def file_digest(path: str | Path | None) -> str:
+    """SHA-256 of a file's bytes ("" for None): a cache salt that changes when the checkpoint does."""
+    if path is None:
+        return ""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+PARTIAL_DIR = ".partial"  # in an output folder: finished jobs of a command that has not finished yet
+
+
+def partial_dir(out_dir: Path, name: str) -> Path:
+    """Where command ``name`` keeps its finished jobs until it has written its outputs."""
+    return out_dir / PARTIAL_DIR / name
+
+
+def kept_jobs(path: Path) -> int:
+    """How many finished jobs an earlier run left in ``path`` (some may belong to other options)."""
+    return len(list(path.glob("*.pkl"))) if path.is_dir() else 0
+
+
+def clear_partial(path: Path) -> None:
+    """Remove a command's kept jobs (its outputs are written), and ``.partial`` once empty."""
+    shutil.rmtree(path, ignore_errors=True)
+    try:
+        path.parent.rmdir()
+    except OSError:
+        pass  # another command's jobs are still kept there, or it is gone already
+
+
+def cache_salt(checkpoint: str | Path | None) -> str:
+    """What else decides a job's result: the checkpoint's bytes and the installed crossway."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        installed = version("crossway")
+    except PackageNotFoundError:
+        installed = "unknown"
+    return f"crossway {installed}; checkpoint {file_digest(checkpoint)}"
+
+
+def _save(path: Path, result) -> None:
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    temporary.write_bytes(pickle.dumps(result))
+    os.replace(temporary, path)  # atomic: a kill leaves the old state or the whole result
+
+
+def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers: int, label: str,
+                 cache_dir: Path | None = None, salt: str = "", sizes: Sequence[int] | None = None) -> list:
     """``function(*job, progress)`` for every job in ``workers`` spawned processes.
 
     Each job puts the number of episodes it finished on ``progress``; this process prints
     ``label: done/total episodes, elapsed, ETA`` on stderr: a bar redrawn at most twice a second
     on a terminal, a line every 30 s (and at the end) into a log file. Results come back in job
     order.
+
+    ``cache_dir``: keep each result there as it comes (``job_key``) and take the ones an earlier,
+    stopped run left instead of running those jobs again; ``sizes``: episodes per job, so that the
+    progress line counts the ones taken from the cache as done.
     """
+    results: list = [None] * len(jobs)
+    todo = list(range(len(jobs)))
+    paths: list[Path | None] = [None] * len(jobs)
+    done = 0
+    if cache_dir is not None:
+        cache_dir.mkdir(parents=True, exist_ok=True)
+        todo = []
+        for index, job in enumerate(jobs):
+            paths[index] = cache_dir / f"{job_key(function, job, salt)}.pkl"
+            if paths[index].is_file():
+                results[index] = pickle.loads(paths[index].read_bytes())
+                done += sizes[index] if sizes is not None else 0
+            else:
+                todo.append(index)
+        if len(todo) < len(jobs):
+            print(f"{label}: {len(jobs) - len(todo)} of {len(jobs)} jobs already done by an earlier run of this "
+                  f"command (kept in {cache_dir}; delete it to start over); running the other {len(todo)}",
+                  file=sys.stderr, flush=True)
+        if not todo:
+            return results
     interactive = sys.stderr.isatty()
     interval = 0.5 if interactive else 30.0
     prefix = "\r" if interactive else ""
     started = time.monotonic()
+    done_at_start = done
     context = multiprocessing.get_context("spawn")  # workers start clean (Zenoh, torch threads)
     progress = context.Queue()
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _stop_on_sigterm) if in_main_thread else None
+
+    def keep(index: int):
+        def callback(result) -> None:  # the pool's result thread, as each job returns
+            results[index] = result
+            if paths[index] is not None:
+                _save(paths[index], result)
+        return callback
+
     try:
-        with context.Pool(processes=max(1, min(workers, len(jobs))), initializer=_start_worker,
+        with context.Pool(processes=max(1, min(workers, len(todo))), initializer=_start_worker,
                           initargs=(progress, os.getpid())) as pool:
-            pending = pool.starmap_async(_run_job, [(function, job) for job in jobs])
-            done, shown = 0, -1.0
-            while not pending.ready() or done < total:
+            pending = [pool.apply_async(_run_job, (function, jobs[index]), callback=keep(index)) for index in todo]
+            shown = -1.0
+            while not all(p.ready() for p in pending) or done < total:
                 try:
                     done += progress.get(timeout=0.5)
                 except queue.Empty:
-                    if pending.ready():
+                    if all(p.ready() for p in pending):
                         break  # every job has returned and reported
                     continue
                 elapsed = time.monotonic() - started
@@ -78,10 +177,13 @@ def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers:
                 shown = elapsed
                 filled = int(BAR_WIDTH * done / max(total, 1))
                 bar = "#" * filled + "-" * (BAR_WIDTH - filled)
+                rate = (done - done_at_start) / max(elapsed, 1e-9)
+                eta = f"{(total - done) / rate:5.0f} s" if rate > 0 else "    ?"
                 print(f"{prefix}{label} [{bar}] {done}/{total} episodes, {elapsed:5.0f} s, "
-                      f"ETA {elapsed / done * (total - done):5.0f} s", end="" if interactive else "\n",
+                      f"ETA {eta}", end="" if interactive else "\n",
                       file=sys.stderr, flush=True)
-            results = pending.get()
+            for p in pending:
+                p.get()  # a job's exception surfaces here
     finally:
         if in_main_thread:
             signal.signal(signal.SIGTERM, previous)

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from algo.policy import ACTION_SCALE
-from evaluation.parallel import run_parallel
+from evaluation.parallel import cache_salt, clear_partial, kept_jobs, partial_dir, run_parallel
 from evaluation.table1 import OUTCOMES
 
 if TYPE_CHECKING:
@@ -248,13 +248,16 @@ def run_reaction(scenario: str, checkpoint: str, episodes: int, delay_max_s: flo
     chunks = [ProbeSpec(spec, delay_max_s, min(CHUNK_EPISODES, episodes - start), seed + start, checkpoint)
               for start in range(0, episodes, CHUNK_EPISODES)]
     started = time.monotonic()
-    parts = run_parallel(run_probe, [(c,) for c in chunks], episodes, workers, f"reaction {spec.name}")
+    kept = partial_dir(out_dir, f"reaction-{spec.name}")  # finished chunks, for a rerun after a stop
+    resumed = kept_jobs(kept)
+    parts = run_parallel(run_probe, [(c,) for c in chunks], episodes, workers, f"reaction {spec.name}",
+                         cache_dir=kept, salt=cache_salt(checkpoint), sizes=[c.episodes for c in chunks])
     summary = summarise(parts)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes": episodes, "delay_max_s": delay_max_s,
             "seed": seed, "workers": workers, "approach_window_m": APPROACH_WINDOW_M,
             "give_way_min_mps2": GIVE_WAY_MIN_MPS2, "risk_horizon_steps": RISK_HORIZON_STEPS,
             "full_speed_ratio": FULL_SPEED_RATIO, "wall_s": round(time.monotonic() - started, 1),
-            "command": command}
+            "command": command, "jobs_from_an_earlier_run": resumed}
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = out_dir / f"reaction-{spec.name}"
     json_path = stem.with_suffix(".json")
@@ -262,4 +265,5 @@ def run_reaction(scenario: str, checkpoint: str, episodes: int, delay_max_s: flo
     md_path = stem.with_suffix(".md")
     text = markdown(summary)
     md_path.write_text(f"# Reaction to priority cars, {spec.name}\n\n{command}\n\n{text}")
+    clear_partial(kept)
     return {"summary": summary, "markdown": text, "paths": [str(json_path), str(md_path)], "meta": meta}

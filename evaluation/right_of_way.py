@@ -217,7 +217,7 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     import time
     from pathlib import Path
 
-    from evaluation.parallel import run_parallel
+    from evaluation.parallel import cache_salt, clear_partial, kept_jobs, partial_dir, run_parallel
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
@@ -231,7 +231,12 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     scripted = scripted or DriverOptions()
     jobs = [(spec, checkpoint, n, seed + 1000 * i, scripted)
             for i, n in enumerate(shares)]
-    parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}")
+    # one job per worker (the seeds follow --workers): a rerun with the same --workers after a stop
+    # takes the shares that had finished
+    kept = partial_dir(Path(out_dir), f"right-of-way-{spec.name}")
+    resumed = kept_jobs(kept)
+    parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}", cache_dir=kept,
+                         salt=cache_salt(checkpoint), sizes=shares)
     clean = sum(p["no_infraction"] for p in parts)
     clean_of_seen = sum(p["no_seen_infraction"] for p in parts)
     infractions = sum(sum(p["infractions_per_episode"]) for p in parts)
@@ -252,7 +257,8 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
                "agent_end_reasons": end_reasons, "checkpoint": checkpoint,
                **(scripted.record() if checkpoint is None else dict.fromkeys(scripted.record())),
                "seed": seed, "workers": workers,
-               "wall_s": round(time.monotonic() - started, 1), "command": command}
+               "wall_s": round(time.monotonic() - started, 1), "command": command,
+               "jobs_from_an_earlier_run": resumed}
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = out_dir / f"right-of-way-{spec.name}"
@@ -273,6 +279,7 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
              f"{summary['infractions_seen_in_time']} / {summary['infractions_offender_crashed']} / {infractions}"
              " | - |\n")
     stem.with_suffix(".md").write_text(f"# Right-of-way test (Table II), {spec.name}\n\n{command}\n\n{table}")
+    clear_partial(kept)
     summary["markdown"] = table
     summary["paths"] = [str(stem.with_suffix(x)) for x in (".json", ".csv", ".md")]
     return summary

@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from evaluation.parallel import run_parallel
+from evaluation.parallel import cache_salt, clear_partial, kept_jobs, partial_dir, run_parallel
 from simcore.controller import DriverOptions
 
 if TYPE_CHECKING:
@@ -227,7 +227,10 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
                       seed=t.seed + 1000 * (start // CHUNK_EPISODES))
               for t in tests for start in range(0, t.episodes, CHUNK_EPISODES)]
     started = time.monotonic()
-    parts = run_parallel(run_test, [(c,) for c in chunks], episodes * len(tests), workers, f"table1 {spec.name}")
+    kept = partial_dir(out_dir, f"table1-{spec.name}")  # finished chunks, for a rerun after a stop
+    resumed = kept_jobs(kept)
+    parts = run_parallel(run_test, [(c,) for c in chunks], episodes * len(tests), workers, f"table1 {spec.name}",
+                         cache_dir=kept, salt=cache_salt(checkpoint), sizes=[c.episodes for c in chunks])
     results = merge_chunks(parts)
     table = summarise(results)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
@@ -236,6 +239,8 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
             # the view square's half-side and shift [m]: what "view" limits the scripted driver to
             "scripted_sight_m": 0.5 * spec.views.extent_m if scripted.sight == "view" else None,
             "scripted_sight_shift_m": spec.views.shift_m if scripted.sight == "view" else None,
-            "wall_s": round(time.monotonic() - started, 1), "command": command}
+            "wall_s": round(time.monotonic() - started, 1), "command": command,
+            "jobs_from_an_earlier_run": resumed}  # wall_s then leaves out their time
     paths = write_outputs(out_dir, spec.name, results, table, meta)
+    clear_partial(kept)
     return {"table": table, "paths": paths, "meta": meta}

@@ -19,7 +19,7 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
-from evaluation.parallel import run_parallel
+from evaluation.parallel import cache_salt, clear_partial, partial_dir, run_parallel
 
 TRAFFIC_LEVELS = {"low": 4, "medium": 8, "high": 12}
 SIGNS = (("south", "stop"), ("east", "none"), ("west", "none"), ("north", "none"))
@@ -92,17 +92,25 @@ def cell_seed(seed: int, level_index: int, delay_index: int) -> int:
     return seed + 100 * level_index + delay_index
 
 
-def _run_all(tests: list[TTCTest], workers: int, label: str) -> list[dict]:
-    return run_parallel(run_ttc_test, [(t,) for t in tests], sum(t.episodes for t in tests), workers, label)
+PARTIAL_NAME = "ttc"  # the sweep's and the comparison's finished cells, until the outputs are written
+
+
+def _run_all(tests: list[TTCTest], workers: int, label: str, out_dir: Path | None = None,
+             checkpoint: str | None = None) -> list[dict]:
+    """Every cell in workers; with ``out_dir`` each finished cell is kept for a rerun after a stop."""
+    cache = partial_dir(out_dir, PARTIAL_NAME) if out_dir is not None else None
+    return run_parallel(run_ttc_test, [(t,) for t in tests], sum(t.episodes for t in tests), workers, label,
+                        cache_dir=cache, salt=cache_salt(checkpoint), sizes=[t.episodes for t in tests])
 
 
 def sweep_thresholds(thresholds: list[float], episodes: int, delays: list[float], workers: int,
-                     seed: int) -> tuple[float | None, list[dict]]:
+                     seed: int, out_dir: Path | None = None) -> tuple[float | None, list[dict]]:
     """The paper's choice: the threshold with the best reach rate among those with zero crashes
-    (over every traffic level and delay)."""
+    (over every traffic level and delay). ``out_dir``: where ``run_comparison`` will write; its
+    finished cells are kept there until then."""
     tests = [TTCTest("ttc", level, d, episodes, cell_seed(seed, j, i), thr, None)
              for thr in thresholds for j, level in enumerate(TRAFFIC_LEVELS) for i, d in enumerate(delays)]
-    rows = _run_all(tests, workers, "ttc sweep")
+    rows = _run_all(tests, workers, "ttc sweep", out_dir)
     best, best_reach = None, -1.0
     for thr in thresholds:
         mine = [r for r in rows if r["threshold_s"] == thr]
@@ -131,7 +139,7 @@ def run_comparison(checkpoint: str | None, threshold_s: float, episodes: int, de
              if r["driver"] == "ttc" and r["threshold_s"] == threshold_s and r["episodes"] == episodes}
     started = time.monotonic()
     to_run = [t for t in tests if not (t.driver == "ttc" and (t.level, t.delay_max_s) in swept)]
-    ran = iter(_run_all(to_run, workers, "ttc comparison") if to_run else [])
+    ran = iter(_run_all(to_run, workers, "ttc comparison", out_dir, checkpoint) if to_run else [])
     rows = [swept[(t.level, t.delay_max_s)] if t not in to_run else next(ran) for t in tests]
     reused = len(tests) - len(to_run)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -146,6 +154,7 @@ def run_comparison(checkpoint: str | None, threshold_s: float, episodes: int, de
             "ttc_cells_from_sweep": reused}
     json_path = out_dir / "ttc-comparison.json"
     json_path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
+    clear_partial(partial_dir(out_dir, PARTIAL_NAME))
     return {"rows": rows, "paths": [json_path, csv_path, *pictures], "meta": meta}
 
 

@@ -345,3 +345,54 @@ def test_stopping_an_evaluation_stops_its_workers(tmp_path, stop_signal):
         if process.poll() is None:
             process.kill()
         process.stderr.close()
+
+
+def test_a_stopped_table1_run_goes_on_from_its_finished_chunks_and_ends_as_an_unbroken_run(tmp_path):
+    """Nothing finished is lost: SIGTERM after some chunks, the same command again runs the rest."""
+    import signal
+    import time
+
+    command = [sys.executable, "-m", "crossway", "evaluate", "table1", "--scripted", "--scenario", "easy",
+               "--episodes", "260", "--workers", "1", "--seed", "3"]  # three tests, one chunk each
+    unbroken = subprocess.run(command + ["--out", str(tmp_path / "unbroken")], capture_output=True, text=True,
+                              timeout=600)
+    assert unbroken.returncode == 0, unbroken.stderr
+    assert not (tmp_path / "unbroken" / ".partial").exists()  # removed once the outputs are written
+    out = tmp_path / "broken"
+    kept = out / ".partial" / "table1-easy"
+    process = subprocess.Popen(command + ["--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 300
+        while not list(kept.glob("*.pkl")) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=60) == 128 + signal.SIGTERM
+    finally:
+        if process.poll() is None:
+            process.kill()
+    finished = len(list(kept.glob("*.pkl")))
+    assert 1 <= finished < 3, "stopped too late to test anything"
+    assert not (out / "table1-easy.json").exists() and not list(kept.glob(".*.tmp"))
+    resumed = subprocess.run(command + ["--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    assert f"{finished} of 3 jobs already done by an earlier run" in resumed.stderr
+    before = json.loads((tmp_path / "unbroken" / "table1-easy.json").read_text())
+    after = json.loads((out / "table1-easy.json").read_text())
+    assert after["tests"] == before["tests"] and after["table"] == before["table"]
+    assert after["meta"]["jobs_from_an_earlier_run"] == finished
+    assert not (out / ".partial").exists()
+
+
+def test_kept_jobs_belong_to_one_checkpoint_file(tmp_path):
+    """A checkpoint rewritten at the same path does not take the old one's results."""
+    from evaluation.parallel import cache_salt, job_key
+    from evaluation.table1 import run_test
+
+    checkpoint = tmp_path / "policy.pt"
+    checkpoint.write_bytes(b"first weights")
+    job = ("same", "arguments")
+    first = job_key(run_test, job, cache_salt(checkpoint))
+    assert job_key(run_test, job, cache_salt(checkpoint)) == first
+    checkpoint.write_bytes(b"second weights")
+    assert job_key(run_test, job, cache_salt(checkpoint)) != first
+    assert job_key(run_test, ("other", "arguments"), cache_salt(None)) != job_key(run_test, job, cache_salt(None))

@@ -232,7 +232,8 @@ def run_ttc_command(args) -> int:
         raise ValueError(f"--threshold must be > 0, got {threshold}")
     rows = []
     if args.sweep:
-        best, rows = sweep_thresholds(_floats(args.sweep, "--sweep"), args.episodes, delays, args.workers, args.seed)
+        best, rows = sweep_thresholds(_floats(args.sweep, "--sweep"), args.episodes, delays, args.workers, args.seed,
+                                      args.out)
         for row in rows:
             print(f"sweep: threshold {row['threshold_s']:g} s, {row['level']:6s} delay {row['delay_max_s']:g} s: "
                   f"reach {row['goal_rate']:.3f} crash {row['crash_rate']:.3f} time-over {row['time_over_rate']:.3f}")
