@@ -19,6 +19,9 @@ from __future__ import annotations
 
 import csv
 import json
+import os
+import signal
+import threading
 import time
 from collections import deque
 from dataclasses import asdict, dataclass, replace
@@ -313,12 +316,14 @@ class Pretrainer:
         state = self.policy.state_dict()
         if averaged and self.averaged is not None:
             state = {**state, **{name: value.clone() for name, value in self.averaged.items()}}
+        temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         torch.save({"policy": state, "policy_config": asdict(self.policy.config),
                     "version": 0, "agent_steps": 0, "note": note,
                     "views": views_record(self.sim.spec.views.extent_m, self.sim.spec.views.shift_m),
                     "pretrain": {**_config_dict(self.config), "samples": self.buffer.added,
                                  "updates": self.updates, "rounds": self.round}},
-                   path)
+                   temporary)
+        os.replace(temporary, path)  # atomic: a reader (or a kill) never sees half a file
         return path
 
 
@@ -331,9 +336,17 @@ def _fmt(rate: float | None) -> str:
     return "  -  " if rate is None else f"{100 * rate:5.1f}%"
 
 
-def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print) -> Path:
+def _raise_interrupt(*_) -> None:
+    raise KeyboardInterrupt  # SIGTERM (a scheduler, kill) ends the run as Ctrl-C does
+
+
+def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print, save_every_s: float = 300.0) -> Path:
     """Rounds until ``config.minutes`` have passed (or ``config.rounds`` are done); writes
-    ``pretrained.pt``, ``pretrain.json`` and ``progress.csv``."""
+    ``pretrained.pt``, ``pretrain.json`` and ``progress.csv``.
+
+    ``save_every_s``: also write the policy (and its last weights) every so often during the
+    run, so that a run killed outright loses at most that much (0: only at the end). Ctrl-C and
+    SIGTERM stop it after writing the policy as it is."""
     out_dir.mkdir(parents=True, exist_ok=True)
     trainer = Pretrainer(config)
     approach = ("" if config.teacher_approach_mps is None else
@@ -352,6 +365,17 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
     started = time.monotonic()
     deadline = started + 60.0 * config.minutes
     progress_path = out_dir / "progress.csv"
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt) if in_main_thread else None
+    last_save = started
+
+    def save(note: str) -> Path:
+        path = trainer.export(out_dir / "pretrained.pt", note)
+        if trainer.averaged is not None:
+            trainer.export(out_dir / "pretrained-last.pt", note + " (the last weights, not their average)",
+                           averaged=False)
+        return path
+
     with progress_path.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=PROGRESS_COLUMNS, extrasaction="ignore")
         writer.writeheader()
@@ -370,17 +394,22 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print)
                     f"updates {row['updates']:,}  "
                     f"{losses}  reach (last {ROLLING_EPISODES}): student {_fmt(row['student_reach_rate'])} "
                     f"teacher {_fmt(row['teacher_reach_rate'])}")
-        except KeyboardInterrupt:  # Ctrl-C: keep what was learnt, as crossway train does
+                if save_every_s > 0 and time.monotonic() - last_save >= save_every_s:
+                    save(f"{command}: a snapshot after {trainer.round} rounds, {trainer.buffer.added:,} samples, "
+                         f"{trainer.updates:,} updates, {(time.monotonic() - started) / 60:.1f} min")
+                    last_save = time.monotonic()
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM: keep what was learnt, as crossway train does
             log("pretrain: interrupted, writing the policy as it is")
+        finally:
+            if in_main_thread:
+                signal.signal(signal.SIGTERM, previous)
     wall = time.monotonic() - started
     note = (f"{command}: {trainer.round} rounds, {trainer.buffer.added:,} samples, {trainer.updates:,} updates, "
             f"{wall / 60:.1f} min")
-    path = trainer.export(out_dir / "pretrained.pt", note)
+    path = save(note)
     if trainer.averaged is not None:
-        last = trainer.export(out_dir / "pretrained-last.pt", note + " (the last weights, not their average)",
-                              averaged=False)
         log(f"pretrain: {path.name} holds the weights' moving average (half-life "
-            f"{config.average_half_life:g} Adam steps), {last.name} the last weights")
+            f"{config.average_half_life:g} Adam steps), pretrained-last.pt the last weights")
     (out_dir / "pretrain.json").write_text(json.dumps(
         {"command": command, "wall_s": round(wall, 1), "rounds": trainer.round, "samples": trainer.buffer.added,
          "updates": trainer.updates, "config": _config_dict(config)}, indent=2))

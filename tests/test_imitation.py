@@ -392,13 +392,17 @@ def test_pretrain_refuses_a_bad_initial_checkpoint(tmp_path):
     assert not (tmp_path / "never").exists()
 
 
-def test_ctrl_c_writes_the_policy_learnt_so_far(tmp_path):
+@pytest.mark.parametrize("stop_signal", ["SIGINT", "SIGTERM"])
+def test_ctrl_c_or_sigterm_writes_the_policy_learnt_so_far(tmp_path, stop_signal):
+    """Ctrl-C, or SIGTERM from a scheduler, stops the run and writes what it learnt; before that,
+    --save-every has written snapshots a run killed outright would leave."""
     import signal
     import time
 
     out = tmp_path / "pre"
     process = subprocess.Popen([sys.executable, "-m", "crossway", "pretrain", "--scenario", "easy", "--minutes", "5",
-                                "--steps-per-round", "150", "--threads", "1", "--out", str(out)],
+                                "--steps-per-round", "150", "--threads", "1", "--save-every", "0.001",
+                                "--out", str(out)],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                # a suite started in the background by a shell inherits SIGINT ignored, and
                                # Python then keeps it ignored: give the child the default disposition
@@ -407,12 +411,18 @@ def test_ctrl_c_writes_the_policy_learnt_so_far(tmp_path):
     deadline = time.monotonic() + 240
     while time.monotonic() < deadline and (not progress.exists() or len(progress.read_text().splitlines()) < 3):
         time.sleep(0.5)  # wait for two rounds: the loop is running
-    process.send_signal(signal.SIGINT)
+    load_policy(out / "pretrained.pt")  # a snapshot, written after a round while the run goes on
+    assert "a snapshot after" in torch.load(out / "pretrained.pt", weights_only=False)["note"]
+    assert process.poll() is None
+    process.send_signal(getattr(signal, stop_signal))
     stdout, stderr = process.communicate(timeout=120)
     assert process.returncode == 0, stderr
     assert "interrupted, writing the policy" in stdout
     load_policy(out / "pretrained.pt")
+    note = torch.load(out / "pretrained.pt", weights_only=False)["note"]
+    assert "a snapshot" not in note and "rounds" in note
     assert (out / "pretrain.json").exists()
+    assert not list(out.glob(".*.tmp"))
 
 
 def test_pretrain_widens_the_initial_network_and_keeps_its_driving(tmp_path):

@@ -30,6 +30,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--rounds", type=int, default=0,
                         help="stop after this many rounds of collection and training (0: --minutes alone decides)")
     parser.add_argument("--out", type=Path, default=Path("runs/pretrain"), help="output directory")
+    parser.add_argument("--save-every", type=float, default=5.0, metavar="MINUTES",
+                        help="also write pretrained.pt every so often during the run, so that a run killed "
+                             "outright loses at most that much (0: only at the end; Ctrl-C and SIGTERM always "
+                             "write it)")
     parser.add_argument("--init-from", type=Path, default=None, metavar="CHECKPOINT",
                         help="start from these weights (a checkpoint or a models/*.pt policy); default: random")
     parser.add_argument("--steps-per-round", type=int, default=500,
@@ -148,6 +152,8 @@ def run(args) -> int:
     load_scenario(args.scenario)  # a clear error for an unknown scenario before anything starts
     if args.minutes <= 0:
         raise ValueError(f"--minutes must be > 0, got {args.minutes}")
+    if not args.save_every >= 0:
+        raise ValueError(f"--save-every must be >= 0 minutes, got {args.save_every}")
     if args.rounds < 0:
         raise ValueError(f"--rounds must be >= 0, got {args.rounds}")
     if args.steps_per_round < 1 or args.batch_size < 1 or args.buffer_samples < 1 or args.threads < 1:
@@ -219,5 +225,6 @@ def run(args) -> int:
         given = ", ".join(SCRIPTED_TEACHER_FLAGS[name] for name in changed)
         raise ValueError(f"{given} shape the scripted driver; --teacher-checkpoint takes none of them")
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True))
+    run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True),
+                 save_every_s=60.0 * args.save_every)
     return 0
