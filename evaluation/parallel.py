@@ -78,9 +78,9 @@ def partial_dir(out_dir: Path, name: str) -> Path:
     return out_dir / PARTIAL_DIR / name
 
 
-def kept_jobs(path: Path) -> int:
-    """How many finished jobs an earlier run left in ``path`` (some may belong to other options)."""
-    return len(list(path.glob("*.pkl"))) if path.is_dir() else 0
+def kept_jobs(function: Callable, jobs: Sequence[tuple], cache_dir: Path, salt: str = "") -> int:
+    """How many of ``jobs`` an earlier run of the same command finished and kept in ``cache_dir``."""
+    return sum((cache_dir / f"{job_key(function, job, salt)}.pkl").is_file() for job in jobs)
 
 
 def clear_partial(path: Path) -> None:

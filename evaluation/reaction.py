@@ -248,10 +248,10 @@ def run_reaction(scenario: str, checkpoint: str, episodes: int, delay_max_s: flo
     chunks = [ProbeSpec(spec, delay_max_s, min(CHUNK_EPISODES, episodes - start), seed + start, checkpoint)
               for start in range(0, episodes, CHUNK_EPISODES)]
     started = time.monotonic()
-    kept = partial_dir(out_dir, f"reaction-{spec.name}")  # finished chunks, for a rerun after a stop
-    resumed = kept_jobs(kept)
-    parts = run_parallel(run_probe, [(c,) for c in chunks], episodes, workers, f"reaction {spec.name}",
-                         cache_dir=kept, salt=cache_salt(checkpoint), sizes=[c.episodes for c in chunks])
+    kept, salt, jobs = partial_dir(out_dir, f"reaction-{spec.name}"), cache_salt(checkpoint), [(c,) for c in chunks]
+    resumed = kept_jobs(run_probe, jobs, kept, salt)  # finished chunks of an earlier run, stopped
+    parts = run_parallel(run_probe, jobs, episodes, workers, f"reaction {spec.name}",
+                         cache_dir=kept, salt=salt, sizes=[c.episodes for c in chunks])
     summary = summarise(parts)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes": episodes, "delay_max_s": delay_max_s,
             "seed": seed, "workers": workers, "approach_window_m": APPROACH_WINDOW_M,

@@ -233,10 +233,10 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
             for i, n in enumerate(shares)]
     # one job per worker (the seeds follow --workers): a rerun with the same --workers after a stop
     # takes the shares that had finished
-    kept = partial_dir(Path(out_dir), f"right-of-way-{spec.name}")
-    resumed = kept_jobs(kept)
+    kept, salt = partial_dir(Path(out_dir), f"right-of-way-{spec.name}"), cache_salt(checkpoint)
+    resumed = kept_jobs(run_episodes, jobs, kept, salt)
     parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}", cache_dir=kept,
-                         salt=cache_salt(checkpoint), sizes=shares)
+                         salt=salt, sizes=shares)
     clean = sum(p["no_infraction"] for p in parts)
     clean_of_seen = sum(p["no_seen_infraction"] for p in parts)
     infractions = sum(sum(p["infractions_per_episode"]) for p in parts)

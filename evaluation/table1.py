@@ -227,10 +227,10 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
                       seed=t.seed + 1000 * (start // CHUNK_EPISODES))
               for t in tests for start in range(0, t.episodes, CHUNK_EPISODES)]
     started = time.monotonic()
-    kept = partial_dir(out_dir, f"table1-{spec.name}")  # finished chunks, for a rerun after a stop
-    resumed = kept_jobs(kept)
-    parts = run_parallel(run_test, [(c,) for c in chunks], episodes * len(tests), workers, f"table1 {spec.name}",
-                         cache_dir=kept, salt=cache_salt(checkpoint), sizes=[c.episodes for c in chunks])
+    kept, salt, jobs = partial_dir(out_dir, f"table1-{spec.name}"), cache_salt(checkpoint), [(c,) for c in chunks]
+    resumed = kept_jobs(run_test, jobs, kept, salt)  # finished chunks of an earlier run, stopped
+    parts = run_parallel(run_test, jobs, episodes * len(tests), workers, f"table1 {spec.name}",
+                         cache_dir=kept, salt=salt, sizes=[c.episodes for c in chunks])
     results = merge_chunks(parts)
     table = summarise(results)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,

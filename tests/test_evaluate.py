@@ -360,18 +360,20 @@ def test_a_stopped_table1_run_goes_on_from_its_finished_chunks_and_ends_as_an_un
     assert not (tmp_path / "unbroken" / ".partial").exists()  # removed once the outputs are written
     out = tmp_path / "broken"
     kept = out / ".partial" / "table1-easy"
-    process = subprocess.Popen(command + ["--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    log_path = tmp_path / "broken.log"
+    with open(log_path, "w") as log:
+        process = subprocess.Popen(command + ["--out", str(out)], stdout=log, stderr=subprocess.STDOUT)
     try:
         deadline = time.monotonic() + 300
         while not list(kept.glob("*.pkl")) and time.monotonic() < deadline:
             time.sleep(0.1)
         process.send_signal(signal.SIGTERM)
-        assert process.wait(timeout=60) == 128 + signal.SIGTERM
+        assert process.wait(timeout=120) == 128 + signal.SIGTERM, log_path.read_text()
     finally:
         if process.poll() is None:
             process.kill()
     finished = len(list(kept.glob("*.pkl")))
-    assert 1 <= finished < 3, "stopped too late to test anything"
+    assert 1 <= finished < 3, f"stopped too late to test anything: {log_path.read_text()}"
     assert not (out / "table1-easy.json").exists() and not list(kept.glob(".*.tmp"))
     resumed = subprocess.run(command + ["--out", str(out)], capture_output=True, text=True, timeout=600)
     assert resumed.returncode == 0, resumed.stderr
@@ -385,7 +387,7 @@ def test_a_stopped_table1_run_goes_on_from_its_finished_chunks_and_ends_as_an_un
 
 def test_kept_jobs_belong_to_one_checkpoint_file(tmp_path):
     """A checkpoint rewritten at the same path does not take the old one's results."""
-    from evaluation.parallel import cache_salt, job_key
+    from evaluation.parallel import cache_salt, job_key, kept_jobs
     from evaluation.table1 import run_test
 
     checkpoint = tmp_path / "policy.pt"
@@ -396,3 +398,12 @@ def test_kept_jobs_belong_to_one_checkpoint_file(tmp_path):
     checkpoint.write_bytes(b"second weights")
     assert job_key(run_test, job, cache_salt(checkpoint)) != first
     assert job_key(run_test, ("other", "arguments"), cache_salt(None)) != job_key(run_test, job, cache_salt(None))
+    # only a job's own file counts as done: not another command's, not another checkpoint's
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    (kept / f"{first}.pkl").write_bytes(b"the first checkpoint's result")
+    (kept / "stray.pkl").write_bytes(b"another job's result")
+    salt = cache_salt(checkpoint)
+    assert kept_jobs(run_test, [job], kept, salt) == 0
+    (kept / f"{job_key(run_test, job, salt)}.pkl").write_bytes(b"this one's")
+    assert kept_jobs(run_test, [job, ("other", "arguments")], kept, salt) == 1
