@@ -13,7 +13,9 @@ def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "evaluate", help="run the paper's experiments on a checkpoint",
         description="Evaluate a trained checkpoint with the paper's protocols. Each writes JSON, CSV and a "
-                    "Markdown table (with the paper's numbers beside ours) into --out.",
+                    "Markdown table (with the paper's numbers beside ours) into --out. Stopped (Ctrl-C, "
+                    "SIGTERM), the same command run again goes on from the jobs that had finished, kept in "
+                    "--out/.partial until the outputs are written.",
     )
     experiments = parser.add_subparsers(dest="experiment", metavar="EXPERIMENT", required=True)
     fmt = argparse.ArgumentDefaultsHelpFormatter
