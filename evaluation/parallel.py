@@ -131,10 +131,14 @@ def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers:
         todo = []
         for index, job in enumerate(jobs):
             paths[index] = cache_dir / f"{job_key(function, job, salt)}.pkl"
-            if paths[index].is_file():
+            try:
                 results[index] = pickle.loads(paths[index].read_bytes())
                 done += sizes[index] if sizes is not None else 0
-            else:
+            except FileNotFoundError:
+                todo.append(index)
+            except Exception as error:  # unreadable: run the job again rather than stop
+                print(f"{label}: ignored a kept result that does not read ({type(error).__name__}: {error}); "
+                      "running its job again", file=sys.stderr, flush=True)
                 todo.append(index)
         if len(todo) < len(jobs):
             print(f"{label}: {len(jobs) - len(todo)} of {len(jobs)} jobs already done by an earlier run of this "
@@ -156,7 +160,11 @@ def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers:
         def callback(result) -> None:  # the pool's result thread, as each job returns
             results[index] = result
             if paths[index] is not None:
-                _save(paths[index], result)
+                try:
+                    _save(paths[index], result)
+                except OSError as error:  # a full disk must not stop the run: it only loses the keeping
+                    print(f"{label}: could not keep a finished job in {cache_dir} ({error})", file=sys.stderr,
+                          flush=True)
         return callback
 
     try:

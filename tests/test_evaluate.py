@@ -407,3 +407,22 @@ def test_kept_jobs_belong_to_one_checkpoint_file(tmp_path):
     assert kept_jobs(run_test, [job], kept, salt) == 0
     (kept / f"{job_key(run_test, job, salt)}.pkl").write_bytes(b"this one's")
     assert kept_jobs(run_test, [job, ("other", "arguments")], kept, salt) == 1
+
+
+def test_a_kept_result_that_does_not_read_is_run_again(tmp_path, capfd):
+    from evaluation.parallel import cache_salt, job_key, run_parallel
+    from evaluation.table1 import TestSpec, run_test
+    from simcore.controller import DriverOptions
+    from simcore.scenario import load_scenario
+
+    job = (TestSpec(load_scenario("easy"), 10.0, 2, 7, None, DriverOptions()),)
+    salt = cache_salt(None)
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    (kept / f"{job_key(run_test, job, salt)}.pkl").write_bytes(b"half a pickle")
+    results = run_parallel(run_test, [job], 2, 1, "table1 easy", cache_dir=kept, salt=salt, sizes=[2])
+    assert "ignored a kept result that does not read" in capfd.readouterr().err
+    assert sum(sum(counts.values()) for counts in results[0]["counts"].values()) >= 2
+    # the rerun's result replaced the broken one: a third run takes it without driving
+    again = run_parallel(run_test, [job], 2, 1, "table1 easy", cache_dir=kept, salt=salt, sizes=[2])
+    assert again == results and "1 of 1 jobs already done" in capfd.readouterr().err
