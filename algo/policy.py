@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import collections
 import math
+import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -382,6 +383,19 @@ def sigma_at(agent_steps: int, decay_agent_steps: int, start: float = 0.65, end:
 
 def parameter_shapes(policy: nn.Module) -> dict[str, tuple[int, ...]]:
     return {name: tuple(p.shape) for name, p in policy.named_parameters()}
+
+
+def save_atomically(state: dict, path: str | Path) -> Path:
+    """``torch.save`` to a temporary file beside ``path``, fsync, rename: a reader, or a kill
+    mid-write, sees the old file or the whole new one, never half of it."""
+    path = Path(path)
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(temporary, "wb") as handle:
+        torch.save(state, handle)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(temporary, path)
+    return path
 
 
 def load_policy(checkpoint: str | Path) -> Policy:

@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from algo.policy import ACTION_SCALE, Policy, ensemble_members, load_policy, member_weights, require_views
+from algo.policy import (ACTION_SCALE, Policy, ensemble_members, load_policy, member_weights, require_views,
+                         save_atomically)
 from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
 
 
@@ -36,8 +37,7 @@ def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Pa
                 "run_id": state.get("run_id"), "note": note}
     if "views" in state:  # a file without the record reads as the paper's views (algo.policy.policy_views)
         exported["views"] = state["views"]
-    torch.save(exported, out)
-    return out
+    return save_atomically(exported, out)
 
 
 class PolicyDriver:

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import signal
 import threading
 import time
@@ -31,7 +30,7 @@ import numpy as np
 import torch
 
 from algo.imitation import BRAKE_LABEL, DemonstrationBuffer, Episode, imitation_loss, newest_frames
-from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy, views_record, widen
+from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy, save_atomically, views_record, widen
 from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S, SIGHTS
 
 PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
@@ -316,15 +315,11 @@ class Pretrainer:
         state = self.policy.state_dict()
         if averaged and self.averaged is not None:
             state = {**state, **{name: value.clone() for name, value in self.averaged.items()}}
-        temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        torch.save({"policy": state, "policy_config": asdict(self.policy.config),
-                    "version": 0, "agent_steps": 0, "note": note,
-                    "views": views_record(self.sim.spec.views.extent_m, self.sim.spec.views.shift_m),
-                    "pretrain": {**_config_dict(self.config), "samples": self.buffer.added,
-                                 "updates": self.updates, "rounds": self.round}},
-                   temporary)
-        os.replace(temporary, path)  # atomic: a reader (or a kill) never sees half a file
-        return path
+        return save_atomically({"policy": state, "policy_config": asdict(self.policy.config),
+                                "version": 0, "agent_steps": 0, "note": note,
+                                "views": views_record(self.sim.spec.views.extent_m, self.sim.spec.views.shift_m),
+                                "pretrain": {**_config_dict(self.config), "samples": self.buffer.added,
+                                             "updates": self.updates, "rounds": self.round}}, path)
 
 
 def _sizes(config: PolicyConfig) -> str:

@@ -34,7 +34,7 @@ from pathlib import Path
 import torch
 import zenoh
 
-from algo.policy import ViewMismatch, load_policy
+from algo.policy import ViewMismatch, load_policy, save_atomically
 from learner.core import LearnerConfig, LearnerCore, StaleGradient
 from learner.metrics import LearnerMetrics
 from protocol import keys
@@ -80,6 +80,21 @@ class RunDirInUse(ValueError):
     """Another live process holds the run directory's lock."""
 
 
+def _holder(handle) -> str | None:
+    """Try the exclusive lock on an open lock file: None if this process has it now, else who holds it."""
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.seek(0)
+        return handle.read().strip() or "a process that has not written its name yet"
+    return None
+
+
+def _refusal(run_dir: Path, holder: str) -> RunDirInUse:
+    return RunDirInUse(f"run directory {run_dir} is in use by another learner ({holder}); stop that one "
+                       "first or give another run directory")
+
+
 def lock_run_dir(run_dir: Path):
     """Lock ``run_dir`` for this process: an open file holding an exclusive ``flock``.
 
@@ -89,14 +104,9 @@ def lock_run_dir(run_dir: Path):
     """
     run_dir.mkdir(parents=True, exist_ok=True)
     handle = open(run_dir / LOCK_NAME, "a+")
-    try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        handle.seek(0)
-        holder = handle.read().strip() or "a process that has not written its name yet"
+    if (holder := _holder(handle)) is not None:
         handle.close()
-        raise RunDirInUse(f"run directory {run_dir} is in use by another learner ({holder}); stop that one "
-                          "first or give another run directory") from None
+        raise _refusal(run_dir, holder)
     handle.truncate(0)
     handle.write(f"pid {os.getpid()} on {socket.gethostname()} since {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
     handle.flush()
@@ -104,9 +114,14 @@ def lock_run_dir(run_dir: Path):
 
 
 def check_run_dir_free(run_dir: Path) -> None:
-    """Raise ``RunDirInUse`` if a learner holds ``run_dir`` now (a launcher's check before it starts one)."""
-    if (run_dir / LOCK_NAME).exists():
-        lock_run_dir(run_dir).close()
+    """Raise ``RunDirInUse`` if a learner holds ``run_dir`` now (a launcher's check before it starts
+    one); leaves the lock file as it is."""
+    if not (run_dir / LOCK_NAME).exists():
+        return
+    with open(run_dir / LOCK_NAME) as handle:
+        holder = _holder(handle)
+    if holder is not None:
+        raise _refusal(run_dir, holder)
 
 
 def newest_checkpoint(run_dir: Path) -> Path | None:
@@ -126,16 +141,11 @@ def write_checkpoint(run_dir: Path, core: LearnerCore, run_id: str, progress: di
     directory = run_dir / "checkpoints"
     directory.mkdir(parents=True, exist_ok=True)
     final = directory / f"ckpt-{core.version:09d}.pt"
-    temporary = directory / f".{final.name}.{os.getpid()}.tmp"
     state = core.state_dict()
     state["run_id"] = run_id
     if progress is not None:
         state["progress"] = progress
-    with open(temporary, "wb") as handle:
-        torch.save(state, handle)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(temporary, final)
+    save_atomically(state, final)
     old = sorted(p for p in directory.iterdir() if CHECKPOINT_PATTERN.match(p.name))
     for path in old[:-KEEP_CHECKPOINTS]:
         path.unlink(missing_ok=True)

@@ -339,9 +339,9 @@ def _child_actor(config) -> None:
 def run_train_command(args) -> int:
     import zenoh
 
+    from learner.service import check_run_dir_free
     from protocol import keys
     from protocol.messages import DecodeError, LearnerStatus, decode
-    from learner.service import check_run_dir_free
     from protocol.transport import TransportConfig, open_session
     from simcore.scenario import build_intersection, load_scenario
 
