@@ -210,6 +210,14 @@ def run_episodes(scenario: ScenarioSpec | str, checkpoint: str | None, episodes:
             "infractions_per_episode": infraction_counts, "anatomy": anatomy, "end_reasons": end_reasons}
 
 
+CHUNK_EPISODES = 150  # episodes per job (300 on two workers split as before session 28: seeds S, S + 1000)
+
+
+def chunk_sizes(episodes: int) -> list[int]:
+    """The test's jobs: ``episodes`` in chunks of ``CHUNK_EPISODES``, the last one shorter."""
+    return [min(CHUNK_EPISODES, episodes - start) for start in range(0, episodes, CHUNK_EPISODES)]
+
+
 def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
                      out_dir, command: str, scripted: DriverOptions | None = None) -> dict:
     """The whole test in parallel workers; writes JSON, CSV and Markdown into ``out_dir``."""
@@ -225,14 +233,14 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
         from evaluation.policy import check_checkpoint
 
         check_checkpoint(checkpoint, spec)
-    workers = max(1, min(workers, episodes))
-    shares = [episodes // workers + (i < episodes % workers) for i in range(workers)]
+    # jobs of at most CHUNK_EPISODES episodes, each with its own simulator and seed: the numbers do
+    # not depend on --workers, and a rerun after a stop takes the chunks that had finished
+    shares = chunk_sizes(episodes)
+    workers = max(1, min(workers, len(shares)))
     started = time.monotonic()
     scripted = scripted or DriverOptions()
     jobs = [(spec, checkpoint, n, seed + 1000 * i, scripted)
             for i, n in enumerate(shares)]
-    # one job per worker (the seeds follow --workers): a rerun with the same --workers after a stop
-    # takes the shares that had finished
     kept, salt = partial_dir(Path(out_dir), f"right-of-way-{spec.name}"), cache_salt(checkpoint)
     resumed = kept_jobs(run_episodes, jobs, kept, salt)
     parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}", cache_dir=kept,
@@ -256,7 +264,7 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
                "view_extent_m": spec.views.extent_m, "view_shift_m": spec.views.shift_m,
                "agent_end_reasons": end_reasons, "checkpoint": checkpoint,
                **(scripted.record() if checkpoint is None else dict.fromkeys(scripted.record())),
-               "seed": seed, "workers": workers,
+               "seed": seed, "workers": workers, "episodes_per_job": CHUNK_EPISODES,
                "wall_s": round(time.monotonic() - started, 1), "command": command,
                "jobs_from_an_earlier_run": resumed}
     out_dir = Path(out_dir)

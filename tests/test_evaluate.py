@@ -11,6 +11,7 @@ import torch
 from algo.policy import PolicyConfig
 from evaluation.table1 import delay_schedule, summarise
 from learner.core import LearnerCore
+from simcore.controller import DriverOptions
 
 
 def crossway(*args, timeout=300):
@@ -141,6 +142,21 @@ def test_right_of_way_scripted_end_to_end(tmp_path):
     refused = crossway("evaluate", "right-of-way", "--checkpoint", str(tmp_path / "any.pt"), "--scripted-sight", "view",
                        "--episodes", "2", "--out", str(tmp_path / "refused"))
     assert refused.returncode != 0 and "go with --scripted, not with --checkpoint" in refused.stderr
+
+
+def test_right_of_way_numbers_do_not_depend_on_the_workers(tmp_path, monkeypatch):
+    from evaluation import right_of_way
+
+    monkeypatch.setattr(right_of_way, "CHUNK_EPISODES", 2)  # three jobs from five episodes
+    assert right_of_way.chunk_sizes(5) == [2, 2, 1]
+    runs = {}
+    for workers in (1, 3):
+        summary = right_of_way.run_right_of_way("easy", None, 5, workers, seed=4, out_dir=tmp_path / str(workers),
+                                                command="test", scripted=DriverOptions(sight="view"))
+        assert summary["episodes_per_job"] == 2 and summary["workers"] == workers
+        runs[workers] = {k: v for k, v in summary.items() if k not in ("workers", "wall_s", "paths")}
+    assert runs[1] == runs[3]
+    assert sum(runs[1]["agent_end_reasons"].values()) == 5 * 3
 
 
 def test_ttc_comparison_end_to_end(tmp_path):
