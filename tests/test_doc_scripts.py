@@ -113,6 +113,29 @@ def test_crash_kinds_drives_the_hard_teacher_with_its_options():
     assert sum(report["outcomes"].values()) == report["episodes"] >= 20
 
 
+def test_burst_starts_splits_table1s_own_episodes_by_how_they_began():
+    from evaluation.table1 import TestSpec, run_test
+    from simcore.controller import DriverOptions
+
+    teacher = ("--brake-for-blockers", "--wait-outside-zones", "--break-wait-cycles")
+    # 90 episodes at delay_max 10 s outlast the first redraw (120 s) of the hard junction's signs
+    report = _run_script("burst_starts.py", "--delays", "10", "--episodes", "90", "--workers", "1", "--seed", "5",
+                         *teacher)
+    assert report["driver"]["scripted_wait_outside_zones"] and report["sign_change_interval_s"] == 120.0
+    split = report["counts"]
+    assert report["summary"]["burst/all"]["episodes"] > 0 and report["summary"]["staggered/all"]["episodes"] > 0
+    # the same episodes crossway evaluate table1 counts for that test (same seed), only split in two
+    options = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
+                            wait_outside_zones=True, break_wait_cycles=True)
+    table1 = run_test(TestSpec("hard", 10.0, 90, seed=5, checkpoint=None, scripted=options))["counts"]
+    for sign, outcomes in table1.items():
+        for outcome, n in outcomes.items():
+            assert split["burst"].get(sign, {}).get(outcome, 0) + split["staggered"].get(sign, {}).get(outcome, 0) == n
+    never = _run_script("burst_starts.py", "--delays", "10", "--episodes", "90", "--workers", "1", "--seed", "5",
+                        "--sign-change-interval", "0", *teacher)
+    assert never["counts"]["burst"] == {} and never["summary"]["staggered/all"]["episodes"] == 90
+
+
 def test_waiting_cars_prints_the_road_for_a_policy_too():
     result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/waiting_cars.py"), "--scenario", "easy",
                              "--episodes", "4", "--delay-max", "3", "--checkpoint", "models/easy-student-guard.pt"],

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import torch
 
-from algo.policy import Caution, load_policy, policy_views
+from algo.policy import Caution, load_policy, policy_views, save_atomically
 
 
 def joined_checkpoint(checkpoints: list[str], caution: Caution | None = None) -> dict:
@@ -84,7 +84,7 @@ def main() -> None:
         joined = joined_checkpoint(args.checkpoints, caution)
     except ValueError as error:
         sys.exit(f"ensemble: {error}")
-    torch.save(joined, args.out)
+    save_atomically(joined, args.out)
     sizes = load_policy(args.out).config
     print(f"wrote {args.out}: the output ensemble of {len(joined['members'])} policies, one network "
           f"{sizes.conv1_channels},{sizes.conv2_channels},{sizes.hidden}"

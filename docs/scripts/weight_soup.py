@@ -17,7 +17,7 @@ from pathlib import Path
 
 import torch
 
-from algo.policy import load_policy, policy_views
+from algo.policy import load_policy, policy_views, save_atomically
 
 
 def soup(checkpoints: list[str]) -> dict:
@@ -52,7 +52,7 @@ def main() -> None:
         averaged = soup(args.checkpoints)
     except ValueError as error:
         sys.exit(f"weight_soup: {error}")
-    torch.save(averaged, args.out)
+    save_atomically(averaged, args.out)
     print(f"wrote {args.out}: the average of {len(args.checkpoints)} checkpoints")
 
 
