@@ -3,6 +3,7 @@
     python docs/scripts/burst_starts.py [--scenario hard] [--delays 10 20 ... 100] [--episodes 300]
         [--seed 0] [--workers 2] [--sign-change-interval 120] [--checkpoint CKPT]
         [--approach-speed 2 --approach-signs own --brake-for-blockers --wait-outside-zones --break-wait-cycles]
+        [--patience 4] [--blocker-patience 8]
 
 The hard junction redraws its signs every ``episodes.sign_change_interval_s`` (120 s) and every
 lane starts a new episode at the next step (paper, "Environment"; docs/simulator.md), so part of
@@ -22,7 +23,7 @@ import multiprocessing
 from collections import Counter, defaultdict
 
 from script_driver import ScriptDriver, add_checkpoint_argument, needs_views
-from simcore.controller import DriverOptions
+from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S, DriverOptions
 from simcore.dynamics import DT
 from simcore.simulator import SimConfig, Simulator
 
@@ -65,7 +66,8 @@ def run_test(job: tuple) -> dict:
 def driver_options(args: argparse.Namespace) -> DriverOptions:
     return DriverOptions(sight="view", approach_speed_mps=args.approach_speed if args.approach_speed > 0 else None,
                          approach_signs=args.approach_signs, brake_for_blockers=args.brake_for_blockers,
-                         wait_outside_zones=args.wait_outside_zones, break_wait_cycles=args.break_wait_cycles)
+                         wait_outside_zones=args.wait_outside_zones, break_wait_cycles=args.break_wait_cycles,
+                         patience_s=args.patience, blocker_patience_s=args.blocker_patience)
 
 
 def driver_record(args: argparse.Namespace) -> dict:
@@ -88,6 +90,9 @@ def main() -> None:
     parser.add_argument("--brake-for-blockers", action="store_true")
     parser.add_argument("--wait-outside-zones", action="store_true")
     parser.add_argument("--break-wait-cycles", action="store_true")
+    parser.add_argument("--patience", type=float, default=PATIENCE_S, help="[s]; inf: never stop yielding")
+    parser.add_argument("--blocker-patience", type=float, default=BLOCKER_PATIENCE_S,
+                        help="[s]; inf: never stop braking for cars in the way")
     add_checkpoint_argument(parser)
     args = parser.parse_args()
     if args.episodes > 500:
