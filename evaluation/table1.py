@@ -16,8 +16,11 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from evaluation.parallel import cache_salt, clear_partial, kept_jobs, partial_dir, run_parallel
 from simcore.controller import DriverOptions
+from simcore.dynamics import DT
 
 if TYPE_CHECKING:
     from simcore.scenario import ScenarioSpec
@@ -26,9 +29,13 @@ SIGNS = ("none", "yield", "stop")
 OUTCOMES = ("goal", "crash", "off_path", "time_over")
 COLUMN_NAMES = {"goal": "Reaches", "crash": "Crashes", "off_path": "Off-roads", "time_over": "Time-overs"}
 
-# Table I of the paper: per scenario and sign, (reaches, crashes, off-roads, time-overs, speed m/s)
 CHUNK_EPISODES = 500  # a test's episodes per worker job
+# how an episode began: within BURST_WINDOW_S after a sign redraw, when every lane of the hard
+# junction starts at once (paper, "Environment"), or at its own random delay
+STARTS = ("burst", "staggered")
+BURST_WINDOW_S = 2 * DT  # [s]
 
+# Table I of the paper: per scenario and sign, (reaches, crashes, off-roads, time-overs, speed m/s)
 PAPER_TABLE1 = {
     "easy": {"none": (0.998, 0.002, 0.0, 0.0, 8.533), "yield": (0.995, 0.005, 0.0, 0.0, 8.280),
              "stop": (0.992, 0.008, 0.0, 0.0, 8.105)},
@@ -73,22 +80,34 @@ def run_test(spec: TestSpec, progress=None) -> dict:
     else:
         act = scripted_driver(sim, spec.scripted).act
     counts: dict[str, Counter] = defaultdict(Counter)
+    by_start: dict[str, dict[str, Counter]] = {kind: defaultdict(Counter) for kind in STARTS}
     speed_sum: Counter = Counter()
+    started_s = {v: sim.time_s for v in np.flatnonzero(result.started).tolist()}  # slot -> its episode's start [s]
+    redraws_s: list[float] = []  # when the signs were redrawn and every lane restarted [s]
     done = 0
     while done < spec.episodes:
+        next_redraw_s = sim.next_sign_change_s
         result = sim.step(act())
+        if sim.next_sign_change_s != next_redraw_s:
+            redraws_s.append(next_redraw_s)  # when it was due (also when the road stood empty)
         for episode in result.episodes:
+            start_s = started_s.pop(episode.slot, None)
             if episode.end_reason not in OUTCOMES or done >= spec.episodes:
                 continue  # cut short by a sign change: not an outcome
             counts[episode.sign][episode.end_reason] += 1
             speed_sum[episode.sign] += episode.mean_speed_mps
+            burst = start_s is not None and any(0.0 < start_s - r <= BURST_WINDOW_S + 1e-9 for r in redraws_s[-2:])
+            by_start["burst" if burst else "staggered"][episode.sign][episode.end_reason] += 1
             done += 1
             if progress is not None and done % 25 == 0:
                 progress.put(25)
+        for slot in np.flatnonzero(result.started).tolist():
+            started_s[slot] = sim.time_s
     if progress is not None and done % 25:
         progress.put(done % 25)
     return {"delay_max_s": spec.delay_max_s, "counts": {s: dict(c) for s, c in counts.items()},
-            "speed_sum": dict(speed_sum)}
+            "speed_sum": dict(speed_sum),
+            "counts_by_start": {k: {s: dict(c) for s, c in v.items()} for k, v in by_start.items()}}
 
 
 def merge_chunks(parts: list[dict]) -> list[dict]:
@@ -103,7 +122,44 @@ def merge_chunks(parts: list[dict]) -> list[dict]:
                 total[reason] = total.get(reason, 0) + count
         for sign, speed in part["speed_sum"].items():
             test["speed_sum"][sign] = test["speed_sum"].get(sign, 0.0) + speed
+        for kind, by_sign in part.get("counts_by_start", {}).items():
+            for sign, counts in by_sign.items():
+                total = test.setdefault("counts_by_start", {}).setdefault(kind, {}).setdefault(sign, {})
+                for reason, count in counts.items():
+                    total[reason] = total.get(reason, 0) + count
     return list(merged.values())
+
+
+def by_start(tests: list[dict]) -> dict:
+    """Per kind of start (``STARTS``) and sign (and "all"): the episodes of every test pooled, and
+    each outcome's fraction of them; {} for tests run without that record."""
+    table: dict[str, dict] = {}
+    for kind in STARTS:
+        pooled: dict[str, Counter] = defaultdict(Counter)
+        for test in tests:
+            for sign, counts in test.get("counts_by_start", {}).get(kind, {}).items():
+                pooled[sign].update(counts)
+                pooled["all"].update(counts)
+        rows = {}
+        for sign in (*SIGNS, "all"):
+            total = sum(pooled[sign].values())
+            if total:
+                rows[sign] = {"episodes": total, **{o: pooled[sign][o] / total for o in OUTCOMES}}
+        if rows:
+            table[kind] = rows
+    return table
+
+
+def markdown_starts(table: dict) -> str:
+    """Reach, crashes and time-overs per kind of start and sign (``by_start``)."""
+    groups = (*SIGNS, "all")
+    header = ("| began | " + " | ".join(f"{g}: reaches / crashes / time-overs (episodes)" for g in groups) + " |")
+    lines = [header, "|---|" + "---|" * len(groups)]
+    for kind, rows in table.items():
+        cells = [f"{rows[g]['goal']:.3f} / {rows[g]['crash']:.3f} / {rows[g]['time_over']:.3f} ({rows[g]['episodes']})"
+                 if g in rows else "-" for g in groups]
+        lines.append(f"| {kind} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def summarise(tests: list[dict]) -> dict:
@@ -183,7 +239,8 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = out_dir / f"table1-{scenario}"
     json_path = stem.with_suffix(".json")
-    json_path.write_text(json.dumps({"meta": meta, "tests": tests, "table": table,
+    starts = by_start(tests)
+    json_path.write_text(json.dumps({"meta": meta, "tests": tests, "table": table, "by_start": starts,
                                      "paper": PAPER_TABLE1.get(scenario)}, indent=2))
     csv_path = stem.with_suffix(".csv")
     paper = PAPER_TABLE1.get(scenario, {})
@@ -201,10 +258,20 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
     lines += [",".join(str(round(r[c], 5)) if isinstance(r[c], float) else str(r[c]) for c in columns)
               for r in test_rows]
     tests_csv_path.write_text("\n".join(lines) + "\n")
+    starts_csv_path = out_dir / f"table1-{scenario}-starts.csv"
+    columns = ("began", "sign", "episodes", *OUTCOMES)
+    lines = [",".join(columns)]
+    lines += [",".join([kind, sign, str(row["episodes"]), *(str(round(row[o], 5)) for o in OUTCOMES)])
+              for kind, rows in starts.items() for sign, row in rows.items()]
+    starts_csv_path.write_text("\n".join(lines) + "\n")
     md_path = stem.with_suffix(".md")
-    md_path.write_text(f"# Table I, {scenario}\n\n{meta['command']}\n\n" + markdown(scenario, table)
-                       + "\n## Per test\n\n" + markdown_tests(test_rows))
-    return [json_path, csv_path, tests_csv_path, md_path]
+    page = (f"# Table I, {scenario}\n\n{meta['command']}\n\n" + markdown(scenario, table)
+            + "\n## Per test\n\n" + markdown_tests(test_rows))
+    if "burst" in starts:  # signs redrawn during the tests (hard): every lane restarted together
+        page += ("\n## By how the episodes began\n\nburst: within two steps of a sign redraw, when every "
+                 "lane starts at once; staggered: every other episode. All tests pooled.\n\n" + markdown_starts(starts))
+    md_path.write_text(page)
+    return [json_path, csv_path, tests_csv_path, starts_csv_path, md_path]
 
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,

@@ -57,6 +57,34 @@ def test_table1_scripted_end_to_end(tmp_path):
     assert "(paper)" in page and "| Reaches, standard error |" in page and "## Per test" in page
 
 
+def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
+    """Hard redraws its signs every 120 s and restarts every lane: Table I says how the episodes
+    that began in such a burst did, apart from the others (none of them on easy)."""
+    result = crossway("evaluate", "table1", "--scripted", "--scenario", "hard", "--episodes", "40",
+                      "--workers", "2", "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    report = json.loads((tmp_path / "table1-hard.json").read_text())
+    starts = report["by_start"]
+    assert starts["burst"]["all"]["episodes"] > 0 and starts["staggered"]["all"]["episodes"] > 0
+    assert starts["burst"]["all"]["episodes"] + starts["staggered"]["all"]["episodes"] == 400
+    for sign in ("none", "yield", "stop"):  # every counted episode in one of the two, sign by sign
+        pooled = sum(starts[k][sign]["episodes"] for k in starts if sign in starts[k])
+        assert pooled == report["table"][sign]["episodes"]
+    for rows in starts.values():
+        for row in rows.values():
+            assert sum(row[o] for o in ("goal", "crash", "off_path", "time_over")) == pytest.approx(1.0)
+    lines = list(csv.DictReader(open(tmp_path / "table1-hard-starts.csv")))
+    assert list(lines[0]) == ["began", "sign", "episodes", "goal", "crash", "off_path", "time_over"]
+    assert {r["began"] for r in lines} == {"burst", "staggered"}
+    assert "## By how the episodes began" in (tmp_path / "table1-hard.md").read_text()
+
+    easy = crossway("evaluate", "table1", "--scripted", "--scenario", "easy", "--episodes", "5", "--workers", "1",
+                    "--out", str(tmp_path / "easy"))
+    assert easy.returncode == 0, easy.stderr
+    assert set(json.loads((tmp_path / "easy" / "table1-easy.json").read_text())["by_start"]) == {"staggered"}
+    assert "## By how the episodes began" not in (tmp_path / "easy" / "table1-easy.md").read_text()
+
+
 def test_table1_scripted_with_the_views_sight(tmp_path):
     result = crossway("evaluate", "table1", "--scripted", "--scripted-sight", "view", "--scripted-approach-speed",
                       "3", "--scripted-approach-signs", "own", "--scripted-brake-for-blockers",
