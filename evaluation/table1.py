@@ -110,23 +110,25 @@ def run_test(spec: TestSpec, progress=None) -> dict:
             "counts_by_start": {k: {s: dict(c) for s, c in v.items()} for k, v in by_start.items()}}
 
 
+def _add_counts(total: dict[str, dict[str, int]], counts: dict[str, dict[str, int]]) -> None:
+    """Adds ``counts`` (sign -> end reason -> episodes) into ``total``, in place."""
+    for sign, reasons in counts.items():
+        into = total.setdefault(sign, {})
+        for reason, count in reasons.items():
+            into[reason] = into.get(reason, 0) + count
+
+
 def merge_chunks(parts: list[dict]) -> list[dict]:
     """Chunks of the same test (same delay_max) summed into one result per test, in order."""
     merged: dict[float, dict] = {}
     for part in parts:
         test = merged.setdefault(part["delay_max_s"], {"delay_max_s": part["delay_max_s"], "counts": {},
                                                        "speed_sum": {}})
-        for sign, counts in part["counts"].items():
-            total = test["counts"].setdefault(sign, {})
-            for reason, count in counts.items():
-                total[reason] = total.get(reason, 0) + count
+        _add_counts(test["counts"], part["counts"])
         for sign, speed in part["speed_sum"].items():
             test["speed_sum"][sign] = test["speed_sum"].get(sign, 0.0) + speed
-        for kind, by_sign in part.get("counts_by_start", {}).items():
-            for sign, counts in by_sign.items():
-                total = test.setdefault("counts_by_start", {}).setdefault(kind, {}).setdefault(sign, {})
-                for reason, count in counts.items():
-                    total[reason] = total.get(reason, 0) + count
+        for kind, counts in part.get("counts_by_start", {}).items():  # absent in results kept before session 28
+            _add_counts(test.setdefault("counts_by_start", {}).setdefault(kind, {}), counts)
     return list(merged.values())
 
 
