@@ -92,15 +92,39 @@ def clear_partial(path: Path) -> None:
         pass  # another command's jobs are still kept there, or it is gone already
 
 
+# the packages whose code decides an evaluation job's result (simulator, networks, drivers, protocols)
+RESULT_PACKAGES = ("simcore", "algo", "evaluation")
+
+
+def source_digest(roots: Sequence[Path]) -> str:
+    """SHA-256 over the paths and bytes of every ``.py`` file under ``roots``: changes with the code
+    (a development checkout keeps one version number through every change)."""
+    digest = hashlib.sha256()
+    for root in roots:
+        for path in sorted(Path(root).rglob("*.py")):
+            digest.update(str(path.relative_to(root)).encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+_code_digest: str | None = None
+
+
 def cache_salt(checkpoint: str | Path | None) -> str:
-    """What else decides a job's result: the checkpoint's bytes and the installed crossway."""
+    """What else decides a job's result: the checkpoint's bytes and crossway's code (the installed
+    version and the sources of ``RESULT_PACKAGES``), so a run resumed after the code changed runs
+    its jobs again instead of mixing results of two versions."""
+    global _code_digest
+    from importlib import import_module
     from importlib.metadata import PackageNotFoundError, version
 
     try:
         installed = version("crossway")
     except PackageNotFoundError:
         installed = "unknown"
-    return f"crossway {installed}; checkpoint {file_digest(checkpoint)}"
+    if _code_digest is None:
+        _code_digest = source_digest([Path(import_module(name).__file__).parent for name in RESULT_PACKAGES])
+    return f"crossway {installed}, code {_code_digest[:16]}; checkpoint {file_digest(checkpoint)}"
 
 
 def _save(path: Path, result) -> None:

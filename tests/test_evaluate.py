@@ -4,6 +4,7 @@ import csv
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -451,6 +452,32 @@ def test_kept_jobs_belong_to_one_checkpoint_file(tmp_path):
     assert kept_jobs(run_test, [job], kept, salt) == 0
     (kept / f"{job_key(run_test, job, salt)}.pkl").write_bytes(b"this one's")
     assert kept_jobs(run_test, [job, ("other", "arguments")], kept, salt) == 1
+
+
+def test_kept_jobs_belong_to_one_version_of_the_code(tmp_path, monkeypatch):
+    """A run resumed after the simulator's or a driver's code changed runs its jobs again."""
+    from evaluation import parallel
+
+    package = tmp_path / "package"
+    (package / "sub").mkdir(parents=True)
+    (package / "a.py").write_text("x = 1\n")
+    (package / "sub" / "b.py").write_text("y = 2\n")
+    (package / "notes.txt").write_text("not code")
+    before = parallel.source_digest([package])
+    assert parallel.source_digest([package]) == before
+    (package / "notes.txt").write_text("still not code")
+    assert parallel.source_digest([package]) == before
+    (package / "sub" / "b.py").write_text("y = 3\n")
+    changed = parallel.source_digest([package])
+    assert changed != before
+    (package / "sub" / "c.py").write_text("")
+    assert parallel.source_digest([package]) != changed
+    # the salt carries the digest of the packages that decide a result
+    real = parallel.source_digest([Path(__import__(name).__file__).parent for name in parallel.RESULT_PACKAGES])
+    assert f"code {real[:16]}" in parallel.cache_salt(None)
+    salt = parallel.cache_salt(None)
+    monkeypatch.setattr(parallel, "_code_digest", "0" * 64)  # as if the code had changed
+    assert parallel.cache_salt(None) != salt and "code 0000000000000000" in parallel.cache_salt(None)
 
 
 def test_a_kept_result_that_does_not_read_is_run_again(tmp_path, capfd):
