@@ -110,7 +110,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
             "counts_by_start": {k: {s: dict(c) for s, c in v.items()} for k, v in by_start.items()}}
 
 
-def _add_counts(total: dict[str, dict[str, int]], counts: dict[str, dict[str, int]]) -> None:
+def add_counts(total: dict[str, dict[str, int]], counts: dict[str, dict[str, int]]) -> None:
     """Adds ``counts`` (sign -> end reason -> episodes) into ``total``, in place."""
     for sign, reasons in counts.items():
         into = total.setdefault(sign, {})
@@ -124,11 +124,11 @@ def merge_chunks(parts: list[dict]) -> list[dict]:
     for part in parts:
         test = merged.setdefault(part["delay_max_s"], {"delay_max_s": part["delay_max_s"], "counts": {},
                                                        "speed_sum": {}})
-        _add_counts(test["counts"], part["counts"])
+        add_counts(test["counts"], part["counts"])
         for sign, speed in part["speed_sum"].items():
             test["speed_sum"][sign] = test["speed_sum"].get(sign, 0.0) + speed
         for kind, counts in part.get("counts_by_start", {}).items():  # absent in results kept before session 28
-            _add_counts(test.setdefault("counts_by_start", {}).setdefault(kind, {}), counts)
+            add_counts(test.setdefault("counts_by_start", {}).setdefault(kind, {}), counts)
     return list(merged.values())
 
 

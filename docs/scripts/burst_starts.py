@@ -23,7 +23,7 @@ import json
 import multiprocessing
 from dataclasses import replace
 
-from evaluation.table1 import OUTCOMES, SIGNS, STARTS, TestSpec, by_start, run_test
+from evaluation.table1 import SIGNS, STARTS, TestSpec, add_counts, by_start, run_test
 from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S, DriverOptions
 from simcore.scenario import load_scenario
 
@@ -76,14 +76,10 @@ def main() -> None:
                for kind in STARTS for sign in (*SIGNS, "all")}
     per_test = [{"delay_max_s": t["delay_max_s"], **{kind: by_start([t]).get(kind, {}).get("all", {"episodes": 0})
                                                      for kind in STARTS}} for t in tests]
-    counts = {kind: {} for kind in STARTS}
+    counts: dict[str, dict] = {kind: {} for kind in STARTS}
     for test in tests:
         for kind, by_sign in test["counts_by_start"].items():
-            for sign, c in by_sign.items():
-                for outcome in OUTCOMES:
-                    if c.get(outcome):
-                        row = counts[kind].setdefault(sign, {})
-                        row[outcome] = row.get(outcome, 0) + c[outcome]
+            add_counts(counts[kind], by_sign)
     print(json.dumps({"driver": driver_record(args), "scenario": spec.name,
                       "sign_change_interval_s": spec.episodes.sign_change_interval_s,
                       "episodes_per_test": args.episodes, "seed": args.seed, "summary": summary,
