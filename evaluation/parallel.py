@@ -13,6 +13,7 @@ instead of running the jobs again. The caller removes the folder once its output
 from __future__ import annotations
 
 import hashlib
+import json
 import multiprocessing
 import os
 import pickle
@@ -109,11 +110,61 @@ def source_digest(roots: Sequence[Path]) -> str:
 
 _code_digest: str | None = None
 
+# environment variables that choose the float kernels torch, MKL and oneDNN run (their instruction set)
+KERNEL_VARIABLES = ("ATEN_CPU_CAPABILITY", "MKL_ENABLE_INSTRUCTIONS", "MKL_CBWR", "ONEDNN_MAX_CPU_ISA",
+                    "DNNL_MAX_CPU_ISA")
+# CPU features that change which kernels run, as /proc/cpuinfo names them
+KERNEL_CPU_FLAGS = ("avx", "avx2", "fma", "avx512f", "avx512_vnni", "avx512_bf16", "amx_tile")
+
+
+# MKL's code path ("conditional numerical reproducibility") that --portable-kernels asks for: MKL
+# documents the same bits on every Intel CPU with AVX2 (since 2013) at the same thread count; on
+# other CPUs it may keep its usual dispatch
+PORTABLE_MKL_BRANCH = "AVX2"
+
+
+def use_portable_kernels() -> None:
+    """Make the worker processes started from now on multiply on MKL's ``PORTABLE_MKL_BRANCH`` code
+    path instead of the fastest one for this CPU, so that a seed gives the same episodes on every
+    machine with it (``crossway evaluate --portable-kernels``). MKL reads ``MKL_CBWR`` when it
+    starts: it holds for the spawned workers, not for this process's torch if already loaded."""
+    os.environ["MKL_CBWR"] = PORTABLE_MKL_BRANCH
+
+
+def numeric_platform() -> dict:
+    """What, besides the code, the checkpoint and the seed, decides an evaluation's numbers: the
+    library versions and the float kernels they pick for this CPU. A policy's actions differ in the
+    last bits between instruction sets (AVX2 against AVX-512 matrix products), an episode follows
+    the first difference and the counts drift by about a standard error (docs/evaluation.md,
+    "Same numbers on another machine"): an evaluation records this, and a kept job's result is
+    taken only on the same platform."""
+    import platform
+
+    import numpy
+    import torch
+
+    flags: set[str] = set()
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "flags" and not flags:
+                flags = set(value.split())
+            elif key.strip() == "model name":
+                model = value.strip()
+    except OSError:
+        pass  # not Linux: the model from platform, no flags
+    return {"python": platform.python_version(), "torch": torch.__version__, "numpy": numpy.__version__,
+            "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(), "cpu": model,
+            "cpu_flags": [f for f in KERNEL_CPU_FLAGS if f in flags],
+            "kernel_variables": {name: os.environ[name] for name in KERNEL_VARIABLES if name in os.environ}}
+
 
 def cache_salt(checkpoint: str | Path | None) -> str:
-    """What else decides a job's result: the checkpoint's bytes and crossway's code (the installed
-    version and the sources of ``RESULT_PACKAGES``), so a run resumed after the code changed runs
-    its jobs again instead of mixing results of two versions."""
+    """What else decides a job's result: the checkpoint's bytes, crossway's code (the installed
+    version and the sources of ``RESULT_PACKAGES``) and the numeric platform (``numeric_platform``),
+    so a run resumed after the code changed, or on another machine, runs its jobs again instead of
+    mixing results of two versions."""
     global _code_digest
     from importlib import import_module
     from importlib.metadata import PackageNotFoundError, version
@@ -124,7 +175,8 @@ def cache_salt(checkpoint: str | Path | None) -> str:
         installed = "unknown"
     if _code_digest is None:
         _code_digest = source_digest([Path(import_module(name).__file__).parent for name in RESULT_PACKAGES])
-    return f"crossway {installed}, code {_code_digest[:16]}; checkpoint {file_digest(checkpoint)}"
+    platform = json.dumps(numeric_platform(), sort_keys=True)
+    return f"crossway {installed}, code {_code_digest[:16]}; checkpoint {file_digest(checkpoint)}; {platform}"
 
 
 def _save(path: Path, result) -> None:

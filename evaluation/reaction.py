@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from algo.policy import ACTION_SCALE
-from evaluation.parallel import cache_salt, clear_partial, kept_jobs, partial_dir, run_parallel
+from evaluation.parallel import cache_salt, clear_partial, kept_jobs, numeric_platform, partial_dir, run_parallel
 from evaluation.table1 import OUTCOMES
 
 if TYPE_CHECKING:
@@ -257,7 +257,7 @@ def run_reaction(scenario: str, checkpoint: str, episodes: int, delay_max_s: flo
             "seed": seed, "workers": workers, "approach_window_m": APPROACH_WINDOW_M,
             "give_way_min_mps2": GIVE_WAY_MIN_MPS2, "risk_horizon_steps": RISK_HORIZON_STEPS,
             "full_speed_ratio": FULL_SPEED_RATIO, "wall_s": round(time.monotonic() - started, 1),
-            "command": command, "jobs_from_an_earlier_run": resumed}
+            "command": command, "jobs_from_an_earlier_run": resumed, "platform": numeric_platform()}
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = out_dir / f"reaction-{spec.name}"
     json_path = stem.with_suffix(".json")

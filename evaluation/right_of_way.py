@@ -225,7 +225,7 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     import time
     from pathlib import Path
 
-    from evaluation.parallel import cache_salt, clear_partial, kept_jobs, partial_dir, run_parallel
+    from evaluation.parallel import cache_salt, clear_partial, kept_jobs, numeric_platform, partial_dir, run_parallel
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
@@ -266,7 +266,7 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
                **(scripted.record() if checkpoint is None else dict.fromkeys(scripted.record())),
                "seed": seed, "workers": workers, "episodes_per_job": CHUNK_EPISODES,
                "wall_s": round(time.monotonic() - started, 1), "command": command,
-               "jobs_from_an_earlier_run": resumed}
+               "jobs_from_an_earlier_run": resumed, "platform": numeric_platform()}
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = out_dir / f"right-of-way-{spec.name}"

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from evaluation.parallel import cache_salt, clear_partial, kept_jobs, partial_dir, run_parallel
+from evaluation.parallel import cache_salt, clear_partial, kept_jobs, numeric_platform, partial_dir, run_parallel
 from simcore.controller import DriverOptions
 from simcore.dynamics import DT
 
@@ -309,7 +309,8 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
             "scripted_sight_m": 0.5 * spec.views.extent_m if scripted.sight == "view" else None,
             "scripted_sight_shift_m": spec.views.shift_m if scripted.sight == "view" else None,
             "wall_s": round(time.monotonic() - started, 1), "command": command,
-            "jobs_from_an_earlier_run": resumed}  # wall_s then leaves out their time
+            "jobs_from_an_earlier_run": resumed,  # wall_s then leaves out their time
+            "platform": numeric_platform()}
     paths = write_outputs(out_dir, spec.name, results, table, meta)
     clear_partial(kept)
     return {"table": table, "paths": paths, "meta": meta}

@@ -19,7 +19,7 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
-from evaluation.parallel import cache_salt, clear_partial, partial_dir, run_parallel
+from evaluation.parallel import cache_salt, clear_partial, numeric_platform, partial_dir, run_parallel
 
 TRAFFIC_LEVELS = {"low": 4, "medium": 8, "high": 12}
 SIGNS = (("south", "stop"), ("east", "none"), ("west", "none"), ("north", "none"))
@@ -151,7 +151,7 @@ def run_comparison(checkpoint: str | None, threshold_s: float, episodes: int, de
     pictures = draw_figures(rows, threshold_s, out_dir)
     meta = {"checkpoint": checkpoint, "threshold_s": threshold_s, "episodes_per_cell": episodes, "delays_max_s": delays,
             "levels": TRAFFIC_LEVELS, "seed": seed, "wall_s": round(time.monotonic() - started, 1), "command": command,
-            "ttc_cells_from_sweep": reused}
+            "ttc_cells_from_sweep": reused, "platform": numeric_platform()}
     json_path = out_dir / "ttc-comparison.json"
     json_path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
     clear_partial(partial_dir(out_dir, PARTIAL_NAME))

@@ -57,6 +57,7 @@ def test_bench_policy_times_an_ensemble_as_driven_and_joined(tmp_path):
     assert report["members"] == 2 and report["network"] == [32, 32, 256]
     assert report["as_driven_calls_per_s"] > 0 and report["joined_calls_per_s"] > 0
     assert report["as_driven_ms_per_car"] == pytest.approx(1000.0 / report["as_driven_calls_per_s"] / 3, rel=0.01)
+    assert report["platform"]["torch_cpu_capability"] == torch.backends.cpu.get_cpu_capability()  # what ran
     refused = crossway("bench", "policy", "--checkpoint", str(tmp_path / "missing.pt"))
     assert refused.returncode == 2
     assert "no checkpoint file" in refused.stderr and "Traceback" not in refused.stderr
@@ -67,6 +68,7 @@ def test_bench_actor_and_learner_print_json():
     assert actor.returncode == 0, actor.stderr
     report = json.loads(actor.stdout)
     assert report["agent_steps_per_s"] > 0 and report["bare_forward_backward_samples_per_s"] > 0
+    assert report["platform"]["torch"] == report["torch"]
     assert report["ratio_to_bare"] == pytest.approx(
         report["agent_steps_per_s"] / report["bare_forward_backward_samples_per_s"], rel=0.01)
     assert report["peak_rss_bytes"] > 0

@@ -136,6 +136,34 @@ def test_burst_starts_splits_table1s_own_episodes_by_how_they_began():
     assert never["counts"]["burst"] == {} and never["summary"]["staggered/all"]["episodes"] == 90
 
 
+def test_burst_waits_accounts_for_every_second_of_every_episode():
+    from evaluation.table1 import TestSpec, run_test
+    from simcore.controller import DriverOptions
+    from simcore.dynamics import DT
+
+    # 90 episodes at delay_max 10 s outlast the first redraw (120 s): both kinds of start occur
+    report = _run_script("burst_waits.py", "--delay-max", "10", "--episodes", "90", "--seed", "5", "--snapshots", "0")
+    counts, seconds = report["counts"], report["mean_seconds_by_reason"]
+    assert report["driver"]["scripted_break_wait_cycles"] and sum(
+        n for group, n in counts.items() if group.count("/") == 1) == 90
+    assert counts["burst/goal"] > 0 and counts["staggered/goal"] > 0
+    # the teacher drives as in crossway evaluate table1 with the same seed: the same outcomes
+    options = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
+                            wait_outside_zones=True, break_wait_cycles=True)
+    table1 = run_test(TestSpec("hard", 10.0, 90, seed=5, checkpoint=None, scripted=options))["counts"]
+    for sign, outcomes in table1.items():
+        for outcome, n in outcomes.items():
+            assert sum(counts.get(f"{kind}/{sign}/{outcome}", 0) for kind in ("burst", "staggered")) == n
+    for group, reasons in seconds.items():
+        total = sum(reasons.values())  # every step of an episode is filed under one reason
+        assert set(reasons) <= {"moving", "blocker", "priority", "blocker+priority", "other"}
+        assert 1.0 < total <= 40.0 + DT, (group, total)
+        if group.endswith("time_over"):
+            assert abs(total - 40.0) <= 2 * DT  # a time-over lasts the whole limit
+        if group.endswith("goal"):
+            assert reasons["moving"] > 0.5 * total
+
+
 def test_waiting_cars_prints_the_road_for_a_policy_too():
     result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/waiting_cars.py"), "--scenario", "easy",
                              "--episodes", "4", "--delay-max", "3", "--checkpoint", "models/easy-student-guard.pt"],

@@ -2,10 +2,12 @@
 
 import csv
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -276,7 +278,7 @@ def test_ttc_comparison_reuses_the_sweeps_cells_at_the_chosen_threshold(tmp_path
     _, sweep_rows = sweep_thresholds([threshold_s, 1000.0], 4, delays, 2, seed=5)
     fresh = run_comparison(None, threshold_s, 4, delays, 2, 5, tmp_path / "fresh", "test")
     reused = run_comparison(None, threshold_s, 4, delays, 2, 5, tmp_path / "reused", "test", sweep_rows=sweep_rows)
-    assert fresh["meta"]["ttc_cells_from_sweep"] == 0
+    assert fresh["meta"]["ttc_cells_from_sweep"] == 0 and fresh["meta"]["platform"]["torch"] == torch.__version__
     assert reused["meta"]["ttc_cells_from_sweep"] == len(TRAFFIC_LEVELS) * len(delays)
     assert reused["rows"] == fresh["rows"]  # the same episodes, whether driven again or not
     assert [r for r in sweep_rows if r["threshold_s"] == threshold_s] == fresh["rows"]
@@ -296,10 +298,15 @@ def test_evaluations_run_a_scenario_file_with_its_own_views(tmp_path):
     assert table1.returncode == 0, table1.stderr
     meta = json.loads((tmp_path / "t1" / "table1-easy-wide.json").read_text())["meta"]
     assert (meta["scenario"], meta["scripted_sight_m"], meta["scripted_sight_shift_m"]) == ("easy-wide", 35.0, 15.0)
+    assert meta["platform"]["torch"] == torch.__version__ and meta["platform"]["torch_cpu_capability"]
     rules = crossway("evaluate", "right-of-way", "--scripted", "--scenario", str(scenario), "--episodes", "2",
-                     "--workers", "2", "--out", str(tmp_path / "row"))
+                     "--workers", "2", "--portable-kernels", "--out", str(tmp_path / "row"))
     assert rules.returncode == 0, rules.stderr
     assert (tmp_path / "row" / "right-of-way-easy-wide.csv").exists()
+    row = json.loads((tmp_path / "row" / "right-of-way-easy-wide.json").read_text())
+    assert row["platform"]["numpy"] == np.__version__
+    assert row["platform"]["kernel_variables"]["MKL_CBWR"] == "AVX2"  # --portable-kernels
+    assert "MKL_CBWR" not in meta["platform"]["kernel_variables"] or "MKL_CBWR" in os.environ
     # a policy records the view square it learnt from: it is refused on a junction shown through another
     wide = tmp_path / "wide.pt"
     core = LearnerCore()
@@ -478,6 +485,45 @@ def test_kept_jobs_belong_to_one_version_of_the_code(tmp_path, monkeypatch):
     salt = parallel.cache_salt(None)
     monkeypatch.setattr(parallel, "_code_digest", "0" * 64)  # as if the code had changed
     assert parallel.cache_salt(None) != salt and "code 0000000000000000" in parallel.cache_salt(None)
+
+
+def test_kept_jobs_belong_to_one_numeric_platform(monkeypatch):
+    """A run resumed on a machine whose float kernels differ runs its jobs again: there the same
+    seed gives other episodes (docs/evaluation.md, "Same numbers on another machine")."""
+    import numpy
+    import torch
+
+    from evaluation import parallel
+
+    for name in parallel.KERNEL_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    here = parallel.numeric_platform()
+    assert (here["torch"], here["numpy"]) == (torch.__version__, numpy.__version__)
+    assert here["torch_cpu_capability"] == torch.backends.cpu.get_cpu_capability()
+    assert set(here["cpu_flags"]) <= set(parallel.KERNEL_CPU_FLAGS) and here["kernel_variables"] == {}
+    salt = parallel.cache_salt(None)
+    assert parallel.cache_salt(None) == salt
+    # a worker started with MKL limited to AVX2 multiplies otherwise: another platform
+    monkeypatch.setenv("MKL_ENABLE_INSTRUCTIONS", "AVX2")
+    assert parallel.numeric_platform()["kernel_variables"] == {"MKL_ENABLE_INSTRUCTIONS": "AVX2"}
+    assert parallel.cache_salt(None) != salt
+    monkeypatch.delenv("MKL_ENABLE_INSTRUCTIONS")
+    monkeypatch.setattr(torch.backends.cpu, "get_cpu_capability", lambda: "DEFAULT")  # as on an older CPU
+    assert parallel.cache_salt(None) != salt
+
+
+def test_portable_kernels_reach_the_workers(monkeypatch):
+    """--portable-kernels sets MKL's code path in the environment the spawned workers start with."""
+    import os
+
+    from evaluation import parallel
+
+    monkeypatch.setenv("MKL_CBWR", "")  # restored (absent) after the test
+    monkeypatch.delenv("MKL_CBWR")
+    parallel.use_portable_kernels()
+    # os.getenv(name, progress) in a real worker process: that worker's value of the variable
+    assert parallel.run_parallel(os.getenv, [("MKL_CBWR",)], 0, 1, "kernels") == [parallel.PORTABLE_MKL_BRANCH]
+    assert parallel.numeric_platform()["kernel_variables"] == {"MKL_CBWR": parallel.PORTABLE_MKL_BRANCH}
 
 
 def test_a_kept_result_that_does_not_read_is_run_again(tmp_path, capfd):

@@ -82,6 +82,7 @@ def test_reaction_end_to_end_and_a_refused_checkpoint(tmp_path):
     assert result.returncode == 0, result.stderr
     report = json.loads((tmp_path / "out" / "reaction-easy.json").read_text())
     assert report["meta"]["episodes"] == 4 and report["summary"]["episodes"] >= 4
+    assert report["meta"]["platform"]["cpu_flags"] is not None
     summary = report["summary"]
     if summary["encounter_steps"]:
         assert {"acceleration_with_mps2", "acceleration_without_mps2", "give_way_fraction",

@@ -178,6 +178,7 @@ def run_policy_bench(args) -> int:
     import torch
 
     from algo.policy import load_policy
+    from evaluation.parallel import numeric_platform
     from evaluation.policy import PolicyDriver
 
     if not args.seconds > 0 or args.cars < 1:
@@ -206,7 +207,8 @@ def run_policy_bench(args) -> int:
         report[f"{name}_ms_per_car"] = round(1000.0 * elapsed / calls / args.cars, 4)
         if not args.json:
             print(f"bench policy: {name}: {calls / elapsed:.1f} calls/s", file=sys.stderr)
-    report.update({"cpu_pinned": cpu, "torch": torch.__version__, "python": platform.python_version()})
+    report.update({"cpu_pinned": cpu, "torch": torch.__version__, "python": platform.python_version(),
+                   "platform": numeric_platform()})  # the kernels these timings ran on (MKL's path)
     print(json.dumps(report))
     return 0
 
@@ -222,6 +224,7 @@ def run_actor_bench(args) -> int:
     from algo.d_a3c import ActorCore, DA3CConfig
     from algo.policy import Policy, preprocess
     from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
+    from evaluation.parallel import numeric_platform
     from learner.core import LearnerCore
     from simcore.simulator import SimConfig, Simulator
 
@@ -303,7 +306,7 @@ def run_actor_bench(args) -> int:
         "update_interval": args.update_interval, "batch": batch,
         "parameters": sum(p.numel() for p in policy.parameters()),
         "cpu_pinned": cpu, "torch_threads": torch.get_num_threads(),
-        "peak_rss_bytes": peak_rss_bytes(), "torch": torch.__version__,
+        "peak_rss_bytes": peak_rss_bytes(), "torch": torch.__version__, "platform": numeric_platform(),
     }
     print(json.dumps(report))
     return 0

@@ -166,6 +166,12 @@ def _add_run_options(parser, episodes: int, episodes_help: str) -> None:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes")
     parser.add_argument("--seed", type=int, default=0, help="random seed (each worker derives its own)")
     parser.add_argument("--out", type=Path, default=Path("results"), help="output directory")
+    parser.add_argument("--portable-kernels", action="store_true",
+                        help="multiply on MKL's AVX2 code path (MKL_CBWR=AVX2) instead of the fastest one for this "
+                             "CPU: a policy's numbers then repeat to the digit on every Intel CPU with AVX2, not "
+                             "only on the same kind (MKL's documented guarantee); on an AVX-512 machine the network "
+                             "then runs 1.1x (one policy) to 1.45x (a seven-member ensemble) slower; "
+                             "docs/evaluation.md")
 
 
 def _checked(args) -> str | None:
@@ -174,6 +180,10 @@ def _checked(args) -> str | None:
         raise ValueError("give either --checkpoint CKPT or --scripted")
     if args.episodes < 1 or args.workers < 1:
         raise ValueError("--episodes and --workers must be >= 1")
+    if args.portable_kernels:
+        from evaluation.parallel import use_portable_kernels
+
+        use_portable_kernels()  # before any worker starts; the JSON's platform records it
     return str(args.checkpoint) if args.checkpoint else None
 
 
