@@ -160,6 +160,13 @@ def numeric_platform() -> dict:
             "kernel_variables": {name: os.environ[name] for name in KERNEL_VARIABLES if name in os.environ}}
 
 
+def platform_line(platform: dict) -> str:
+    """``numeric_platform()`` in one line for a results page: what the numbers ran on."""
+    variables = "".join(f"; {name}={value}" for name, value in sorted(platform["kernel_variables"].items()))
+    return (f"Ran on {platform['cpu']} ({platform['torch_cpu_capability']}), torch {platform['torch']}, "
+            f"numpy {platform['numpy']}{variables}.")
+
+
 def cache_salt(checkpoint: str | Path | None) -> str:
     """What else decides a job's result: the checkpoint's bytes, crossway's code (the installed
     version and the sources of ``RESULT_PACKAGES``) and the numeric platform (``numeric_platform``),

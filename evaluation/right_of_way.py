@@ -225,7 +225,8 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
     import time
     from pathlib import Path
 
-    from evaluation.parallel import cache_salt, clear_partial, kept_jobs, numeric_platform, partial_dir, run_parallel
+    from evaluation.parallel import (cache_salt, clear_partial, kept_jobs, numeric_platform, partial_dir,
+                                     platform_line, run_parallel)
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
@@ -286,7 +287,8 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
              f"| Infractions (all episodes): seen in time / offender crashed / all | "
              f"{summary['infractions_seen_in_time']} / {summary['infractions_offender_crashed']} / {infractions}"
              " | - |\n")
-    stem.with_suffix(".md").write_text(f"# Right-of-way test (Table II), {spec.name}\n\n{command}\n\n{table}")
+    stem.with_suffix(".md").write_text(f"# Right-of-way test (Table II), {spec.name}\n\n{command}\n\n"
+                                       f"{platform_line(summary['platform'])}\n\n{table}")
     clear_partial(kept)
     summary["markdown"] = table
     summary["paths"] = [str(stem.with_suffix(x)) for x in (".json", ".csv", ".md")]

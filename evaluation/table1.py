@@ -18,7 +18,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from evaluation.parallel import cache_salt, clear_partial, kept_jobs, numeric_platform, partial_dir, run_parallel
+from evaluation.parallel import (cache_salt, clear_partial, kept_jobs, numeric_platform, partial_dir,
+                                 platform_line, run_parallel)
 from simcore.controller import DriverOptions
 from simcore.dynamics import DT
 
@@ -267,7 +268,8 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
               for kind, rows in starts.items() for sign, row in rows.items()]
     starts_csv_path.write_text("\n".join(lines) + "\n")
     md_path = stem.with_suffix(".md")
-    page = (f"# Table I, {scenario}\n\n{meta['command']}\n\n" + markdown(scenario, table)
+    page = (f"# Table I, {scenario}\n\n{meta['command']}\n\n{platform_line(meta['platform'])}\n\n"
+            + markdown(scenario, table)
             + "\n## Per test\n\n" + markdown_tests(test_rows))
     if "burst" in starts:  # signs redrawn during the tests (hard): every lane restarted together
         page += ("\n## By how the episodes began\n\nburst: within two steps of a sign redraw, when every "

@@ -58,6 +58,7 @@ def test_table1_scripted_end_to_end(tmp_path):
     assert [int(r["episodes"]) for r in every] == [6, 6, 6]
     page = (tmp_path / "table1-easy.md").read_text()
     assert "(paper)" in page and "| Reaches, standard error |" in page and "## Per test" in page
+    assert f"torch {torch.__version__}" in page  # the page says what it ran on
 
 
 def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
@@ -306,6 +307,7 @@ def test_evaluations_run_a_scenario_file_with_its_own_views(tmp_path):
     row = json.loads((tmp_path / "row" / "right-of-way-easy-wide.json").read_text())
     assert row["platform"]["numpy"] == np.__version__
     assert row["platform"]["kernel_variables"]["MKL_CBWR"] == "AVX2"  # --portable-kernels
+    assert "MKL_CBWR=AVX2" in (tmp_path / "row" / "right-of-way-easy-wide.md").read_text()
     assert "MKL_CBWR" not in meta["platform"]["kernel_variables"] or "MKL_CBWR" in os.environ
     # a policy records the view square it learnt from: it is refused on a junction shown through another
     wide = tmp_path / "wide.pt"
