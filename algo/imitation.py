@@ -68,10 +68,13 @@ class Episode:
     # per step, whether the teacher's label is its braking for a car in its way (ScriptedDriver.blocker_bound);
     # empty: not recorded (all False)
     blocker: list[bool] = field(default_factory=list)
+    # per step, whether the teacher's label is its going after standing out its patience although a car
+    # with priority is near (ScriptedDriver.patience_released); empty: not recorded (all False)
+    released: list[bool] = field(default_factory=list)
 
     @classmethod
     def empty(cls) -> "Episode":
-        return cls([], [], [], [], [], [])
+        return cls([], [], [], [], [], [], [])
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -102,6 +105,7 @@ class DemonstrationBuffer:
         self.scalars = np.zeros((capacity, SCALARS), dtype=np.float32)
         self.targets = np.zeros((capacity, 2), dtype=np.float32)
         self.blocker = np.zeros(capacity, dtype=bool)  # the label is the teacher's braking for a blocker
+        self.released = np.zeros(capacity, dtype=bool)  # ... its going once its patience ran out
         self.returns = np.zeros((capacity, 2), dtype=np.float32)
         self.value_known = np.zeros(capacity, dtype=bool)
         self.episode_start = np.zeros(capacity, dtype=np.int64)  # absolute index of the episode's first step
@@ -112,8 +116,8 @@ class DemonstrationBuffer:
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.frames, self.scalars, self.targets, self.blocker, self.returns,
-                                      self.value_known, self.episode_start, self.priorities))
+        return sum(a.nbytes for a in (self.frames, self.scalars, self.targets, self.blocker, self.released,
+                                      self.returns, self.value_known, self.episode_start, self.priorities))
 
     def add(self, episode: Episode, terminal: bool) -> None:
         n = len(episode)
@@ -122,13 +126,15 @@ class DemonstrationBuffer:
         if n > self.capacity:  # keep the newest steps; their history reaches back at most 3 of them
             episode = Episode(episode.frames[-self.capacity:], episode.scalars[-self.capacity:],
                               episode.targets[-self.capacity:], episode.rewards[-self.capacity:],
-                              episode.errors[-self.capacity:], episode.blocker[-self.capacity:])
+                              episode.errors[-self.capacity:], episode.blocker[-self.capacity:],
+                              episode.released[-self.capacity:])
             n = self.capacity
         if episode.errors and len(episode.errors) != n:
             raise ValueError(f"an episode of {n} steps with {len(episode.errors)} errors: one per step, or none")
-        if episode.blocker and len(episode.blocker) != n:
-            raise ValueError(f"an episode of {n} steps with {len(episode.blocker)} blocker flags: one per step, "
-                             "or none")
+        for name in ("blocker", "released"):
+            flags = getattr(episode, name)
+            if flags and len(flags) != n:
+                raise ValueError(f"an episode of {n} steps with {len(flags)} {name} flags: one per step, or none")
         rows = np.arange(self.added, self.added + n) % self.capacity
         if self.priority_exponent > 0:
             if episode.errors:
@@ -139,6 +145,7 @@ class DemonstrationBuffer:
         self.scalars[rows] = np.stack(episode.scalars)
         self.targets[rows] = np.stack(episode.targets)
         self.blocker[rows] = np.asarray(episode.blocker, dtype=bool) if episode.blocker else False
+        self.released[rows] = np.asarray(episode.released, dtype=bool) if episode.released else False
         if terminal:
             self.returns[rows] = discounted_returns(np.asarray(episode.rewards, dtype=np.float64), self.gamma)
         self.value_known[rows] = terminal
@@ -183,7 +190,7 @@ class DemonstrationBuffer:
         views, scalars = self.observations(indices)
         rows = indices % self.capacity
         return {"views": views, "scalars": scalars, "targets": self.targets[rows], "blocker": self.blocker[rows],
-                "returns": self.returns[rows], "value_known": self.value_known[rows]}
+                "released": self.released[rows], "returns": self.returns[rows], "value_known": self.value_known[rows]}
 
 
 # a teacher label at or below this (normalised units: -1.5 m/s^2) is a hard braking decision
@@ -191,7 +198,8 @@ BRAKE_LABEL = -0.5
 
 
 def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: float,
-                   brake_weight: float = 1.0, return_errors: bool = False, blocker_weight: float = 1.0):
+                   brake_weight: float = 1.0, return_errors: bool = False, blocker_weight: float = 1.0,
+                   patience_weight: float = 1.0):
     """Mean squared error of both means against the teacher's actions (normalised units), plus
     ``value_coef`` times that of both values against the discounted returns where they are known.
 
@@ -201,7 +209,9 @@ def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: flo
     of each sample whose label is the teacher's braking for a car standing in its way
     (``batch["blocker"]``; a batch without that key has none): in the hard student's crossing
     crashes the car with priority did not brake for the car already in their zone (docs/training.md,
-    session 21).
+    session 21). ``patience_weight`` does the same for each sample whose label is the teacher going
+    once it has stood out its patience although a car with priority is near (``batch["released"]``):
+    0.2% of the hard teacher's car-steps, the "wait, then go" the students have not learnt (session 29).
 
     Returns the loss and its parts as floats; with ``return_errors`` also each sample's
     |mu_acc - label| [B] (normalised units), the priorities of prioritized sampling."""
@@ -213,6 +223,8 @@ def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: flo
     weights = torch.where(targets[:, 0] <= BRAKE_LABEL, brake_weight, 1.0)
     if blocker_weight != 1.0 and "blocker" in batch:
         weights = weights * torch.where(torch.from_numpy(batch["blocker"]), blocker_weight, 1.0)
+    if patience_weight != 1.0 and "released" in batch:
+        weights = weights * torch.where(torch.from_numpy(batch["released"]), patience_weight, 1.0)
     action_loss_acc = (weights * (mu_acc - targets[:, 0]) ** 2).sum() / weights.sum()
     action_loss_sa = ((mu_sa - targets[:, 1]) ** 2).mean()
     count = known.sum().clamp(min=1.0)

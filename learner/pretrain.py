@@ -37,7 +37,8 @@ PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "update
                     "action_loss_sa", "value_loss_acc", "value_loss_sa", "student_episodes",
                     "student_reach_rate", "teacher_episodes", "teacher_reach_rate",
                     "brake_label_share",  # of the samples trained on, the share the teacher brakes hard in
-                    "blocker_label_share")  # ... and the share it brakes for a car in its way in
+                    "blocker_label_share",  # ... and the share it brakes for a car in its way in
+                    "released_label_share")  # ... and the share it goes in once its patience ran out
 ROLLING_EPISODES = 200  # reach rates are over each driver's last this many finished episodes
 
 
@@ -72,6 +73,9 @@ class PretrainConfig:
     # a further factor on the weight of the labels where the teacher brakes for a car in its way (needs
     # teacher_brake_for_blockers)
     blocker_weight: float = 1.0
+    # a further factor on the weight of the labels where the teacher goes, having stood out its patience,
+    # although a car with priority is near (needs a finite teacher_patience_s)
+    patience_weight: float = 1.0
     # draw training samples with probability ~ (student's acceleration error + floor) ** this; 0: uniformly
     # (algo.imitation's prioritized sampling)
     priority_exponent: float = 0.0
@@ -96,7 +100,7 @@ class PretrainConfig:
 # the scripted teacher's settings; a policy teacher (teacher_checkpoint) refuses any of them changed
 SCRIPTED_TEACHER_FIELDS = ("teacher_sight", "teacher_approach_mps", "teacher_approach_signs",
                            "teacher_brake_for_blockers", "teacher_wait_outside_zones", "teacher_break_wait_cycles",
-                           "teacher_patience_s", "teacher_blocker_patience_s", "blocker_weight")
+                           "teacher_patience_s", "teacher_blocker_patience_s", "blocker_weight", "patience_weight")
 
 
 def scripted_teacher_changes(config: PretrainConfig) -> list[str]:
@@ -108,7 +112,8 @@ class PolicyTeacher:
     """A trained policy as the teacher (policy distillation): its Gaussian means, as ``crossway
     evaluate`` drives it (``evaluation.policy.PolicyDriver``, an ensemble's members side by side
     and its caution applied), label every car. It never brakes "for a blocker" in the scripted
-    driver's sense, so ``blocker_bound`` stays False."""
+    driver's sense, so ``blocker_bound`` stays False, nor does it wait out a patience
+    (``patience_released``)."""
 
     def __init__(self, sim, checkpoint: Path):
         from algo.policy import policy_views
@@ -121,6 +126,7 @@ class PolicyTeacher:
                              f"{sim.spec.views.shift_m:g} m ahead")
         self.driver = PolicyDriver(sim, load_policy(checkpoint))
         self.blocker_bound = np.zeros(sim.num_slots, dtype=bool)
+        self.patience_released = np.zeros(sim.num_slots, dtype=bool)
 
     def act(self, result) -> np.ndarray:
         return self.driver.act(result)
@@ -165,6 +171,11 @@ class Pretrainer:
         if config.blocker_weight != 1.0 and not config.teacher_brake_for_blockers:
             raise ValueError("blocker_weight weighs the teacher's braking for blockers: it needs "
                              "teacher_brake_for_blockers")
+        if not 0.0 < config.patience_weight < float("inf"):
+            raise ValueError(f"patience_weight must be > 0, got {config.patience_weight}")
+        if config.patience_weight != 1.0 and config.teacher_patience_s == float("inf"):
+            raise ValueError("patience_weight weighs the teacher's going once its patience ran out: it needs a "
+                             "finite teacher_patience_s")
         if not 0.0 <= config.priority_exponent < float("inf"):
             raise ValueError(f"priority_exponent must be >= 0 (0: uniform), got {config.priority_exponent}")
         if config.average_half_life is not None and not 0.0 < config.average_half_life < float("inf"):
@@ -247,6 +258,7 @@ class Pretrainer:
                 episode.scalars.append(result.scalars[slot].copy())
                 episode.targets.append(targets[k])
                 episode.blocker.append(bool(self.teacher.blocker_bound[slot]))
+                episode.released.append(bool(self.teacher.patience_released[slot]))
                 if errors is not None:
                     episode.errors.append(float(errors[k]))
             self.result = result = sim.step(actions)
@@ -270,10 +282,12 @@ class Pretrainer:
             batch = self.buffer.batch(indices)
             loss, metrics, errors = imitation_loss(self.policy, batch, self.config.value_coef,
                                                    self.config.brake_weight, return_errors=True,
-                                                   blocker_weight=self.config.blocker_weight)
+                                                   blocker_weight=self.config.blocker_weight,
+                                                   patience_weight=self.config.patience_weight)
             self.buffer.update_priorities(indices, errors)
             metrics["brake_label_share"] = float((batch["targets"][:, 0] <= BRAKE_LABEL).mean())
             metrics["blocker_label_share"] = float(batch["blocker"].mean())
+            metrics["released_label_share"] = float(batch["released"].mean())
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             torch.nn.utils.clip_grad_norm_(self.policy.parameters(), 40.0)

@@ -191,6 +191,9 @@ class ScriptedDriver:
         # per slot, after each act(): its acceleration is the braking for a car in its way
         # (brake_for_blockers), the label ``crossway pretrain --blocker-weight`` counts more
         self.blocker_bound = np.zeros(sim.num_slots, dtype=bool)
+        # per slot, after each act(): it goes although a car with priority in sight is near, because
+        # it has stood ``patience_s`` (the label ``crossway pretrain --patience-weight`` counts more)
+        self.patience_released = np.zeros(sim.num_slots, dtype=bool)
         lanes = sim.intersection.lanes
         self._entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])  # per route
         self._entry_branch = np.array([lanes[e].branch for e in self._entry_lane])  # per route
@@ -205,6 +208,8 @@ class ScriptedDriver:
         sim = self.sim
         actions = np.zeros((sim.num_slots, 2))
         self.blocker_bound[:] = False
+        self.patience_released[:] = False
+        released = np.zeros(sim.num_slots, dtype=bool)  # it would yield to a car with priority, had it patience
         blocker_braking = np.full(sim.num_slots, math.inf)  # [m/s^2]; inf: nothing in its way
         idx = np.flatnonzero(sim.present)  # every car, traffic included, is someone to yield to
         learners = sim.learners_present
@@ -244,10 +249,12 @@ class ScriptedDriver:
             acceleration = SPEED_GAIN * (desired - speed)
             patient = self._standing_s[slot] < self.patience_s
             for b, other in enumerate(idx.tolist()):
-                if not (higher[a, b] and patient):
+                if not higher[a, b]:
                     continue
                 merge_ego = merge_at[sim.route[slot], sim.route[other]]
                 if not math.isnan(merge_ego) and sim.s[other] >= merge_at[sim.route[other], sim.route[slot]]:
+                    if not patient:
+                        continue
                     # the other car is already on the lane both routes share: follow it, do not stop
                     ahead = (sim.s[other] - merge_at[sim.route[other], sim.route[slot]]) - (sim.s[slot] - merge_ego)
                     gap = ahead - VEHICLE_LENGTH - FOLLOW_GAP_M
@@ -262,6 +269,9 @@ class ScriptedDriver:
                 other_gap = zone_start[sim.route[other], sim.route[slot]] - (sim.s[other] + half)
                 # far away, even at its target speed: a car waiting at its line for a third one is near
                 if other_gap > YIELD_HORIZON_S * max(sim.speed[other], sim.target_speed[other]):
+                    continue
+                if not patient:  # it has stood too long: it no longer yields
+                    released[slot] |= gap < 3.0 * speed + 5.0
                     continue
                 if gap < 3.0 * speed + 5.0:
                     braking = -speed * speed / (2.0 * gap) if gap > 0.5 else -MAX_ACCELERATION
@@ -294,6 +304,7 @@ class ScriptedDriver:
         self._standing_s[~standing] = 0.0
         np.clip(actions[:, 0], -MAX_ACCELERATION, MAX_ACCELERATION, out=actions[:, 0])
         np.clip(actions[:, 1], -MAX_STEERING, MAX_STEERING, out=actions[:, 1])
+        self.patience_released[:] = released & (actions[:, 0] > 0.0)
         return actions
 
     def _blocker_braking(self, slot: int, idx: np.ndarray, in_sight: np.ndarray, speed: float,

@@ -162,6 +162,24 @@ def test_blocker_weight_multiplies_the_weight_of_labels_that_brake_for_a_blocker
     assert unflagged["action_loss_acc"] == pytest.approx(by_hand, rel=1e-5)
 
 
+def test_patience_weight_multiplies_the_weight_of_labels_that_go_once_the_patience_ran_out():
+    policy, batch, (mu_acc, _, mu_sa, _) = _a_network_and_its_outputs_on_four_samples()
+    labels = np.array([-0.6, 0.9, 0.2, 0.5], np.float32)
+    batch["targets"] = np.stack([labels, mu_sa.numpy()], 1).astype(np.float32)
+    batch["blocker"] = np.array([True, False, False, False])
+    batch["released"] = np.array([False, True, False, True])
+    squared = (labels - mu_acc.numpy()).astype(np.float64) ** 2
+    _, weighted = imitation_loss(policy, batch, value_coef=0.0, brake_weight=5.0, blocker_weight=3.0,
+                                 patience_weight=20.0)
+    weights = np.array([5.0 * 3.0, 20.0, 1.0, 20.0])
+    assert weighted["action_loss_acc"] == pytest.approx((weights * squared).sum() / weights.sum(), rel=1e-5)
+    del batch["released"]  # a batch without the flags: weight 1
+    _, unflagged = imitation_loss(policy, batch, value_coef=0.0, brake_weight=5.0, blocker_weight=3.0,
+                                  patience_weight=20.0)
+    weights = np.array([5.0 * 3.0, 1.0, 1.0, 1.0])
+    assert unflagged["action_loss_acc"] == pytest.approx((weights * squared).sum() / weights.sum(), rel=1e-5)
+
+
 def test_the_buffer_keeps_each_steps_blocker_flag_and_refuses_a_wrong_count():
     buffer = DemonstrationBuffer(capacity=10, gamma=0.9)
     flagged = episode(4, first_value=0)
@@ -174,6 +192,15 @@ def test_the_buffer_keeps_each_steps_blocker_flag_and_refuses_a_wrong_count():
     wrong = episode(3, first_value=0)
     wrong.blocker = [True]
     with pytest.raises(ValueError, match="blocker flags"):
+        buffer.add(wrong, terminal=True)
+    released = episode(2, first_value=0)
+    released.released = [True, False]
+    buffer.add(released, terminal=True)  # rows 1, 2
+    assert buffer.batch(np.array([11, 12]))["released"].tolist() == [True, False]
+    assert not buffer.batch(np.array([8, 9]))["released"].any()  # episodes without the record: False
+    wrong = episode(3, first_value=0)
+    wrong.released = [True]
+    with pytest.raises(ValueError, match="released flags"):
         buffer.add(wrong, terminal=True)
 
 
@@ -196,6 +223,29 @@ def test_pretraining_with_a_blocker_weight_records_the_teachers_braking_for_bloc
         Pretrainer(PretrainConfig(scenario="easy", blocker_weight=5.0))
     with pytest.raises(ValueError, match="blocker_weight must be > 0"):
         Pretrainer(PretrainConfig(scenario="easy", teacher_brake_for_blockers=True, blocker_weight=float("nan")))
+
+
+def test_pretraining_with_a_patience_weight_records_the_teachers_going_after_its_patience():
+    """--patience-weight: the teacher's flag reaches the buffer, its labels go, training reports the
+    share drawn, and the option is refused with a teacher that never runs out of patience."""
+    from learner.pretrain import PretrainConfig, Pretrainer
+
+    trainer = Pretrainer(PretrainConfig(scenario="hard", teacher_sight="view", teacher_brake_for_blockers=True,
+                                        teacher_wait_outside_zones=True, teacher_break_wait_cycles=True,
+                                        teacher_approach_mps=2.0, teacher_approach_signs="own", delay_max_s=10.0,
+                                        teacher_half_life=float("inf"), patience_weight=20.0, torch_threads=1,
+                                        seed=3))
+    trainer.collect(3000)
+    stored = trainer.buffer.released[: trainer.buffer.added]
+    labels = trainer.buffer.targets[: trainer.buffer.added, 0]
+    assert 0.0 < stored.mean() < 0.05  # rare: about 0.2% of the hard teacher's car-steps
+    assert (labels[stored] > 0.0).all()  # it goes
+    metrics = trainer.train(5)
+    assert 0.0 <= metrics["released_label_share"] <= 1.0
+    with pytest.raises(ValueError, match="finite teacher_patience_s"):
+        Pretrainer(PretrainConfig(scenario="easy", teacher_patience_s=float("inf"), patience_weight=20.0))
+    with pytest.raises(ValueError, match="patience_weight must be > 0"):
+        Pretrainer(PretrainConfig(scenario="easy", patience_weight=0.0))
 
 
 def test_imitation_loss_returns_each_samples_acceleration_error_on_request():
@@ -354,6 +404,8 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
     (["--priority-exponent", "-1"], "--priority-exponent must be >= 0"),
     (["--blocker-weight", "0", "--teacher-brake-for-blockers"], "--blocker-weight must be > 0"),
     (["--blocker-weight", "5"], "--blocker-weight weighs the teacher's braking for blockers"),
+    (["--patience-weight", "-1"], "--patience-weight must be > 0"),
+    (["--patience-weight", "20", "--teacher-patience", "inf"], "needs a finite --teacher-patience"),
     (["--teacher-approach-speed", "0"], "--teacher-approach-speed must be a speed > 0"),
     (["--teacher-approach-speed", "nan"], "--teacher-approach-speed must be a speed > 0"),
     (["--average-half-life", "0"], "--average-half-life must be > 0"),

@@ -375,6 +375,8 @@ def test_a_driver_goes_ahead_of_a_car_with_priority_after_its_patience_and_never
         driver = ScriptedDriver(sim, patience_s=patience_s)
         driver._standing_s[south] = stood_s
         assert (driver.act()[south, 0] > 0.0) == goes, (patience_s, stood_s)
+        # the label crossway pretrain --patience-weight counts more: going although the east car is near
+        assert driver.patience_released[south] == goes and not driver.patience_released[east]
     assert scripted_driver(sim, DriverOptions(patience_s=math.inf)).patience_s == math.inf
 
 

@@ -94,6 +94,11 @@ def add_parser(subparsers) -> None:
                              "label is the teacher braking for a car standing in its way (on top of --brake-weight): "
                              "in the hard student's crossing crashes the car with priority ran into a car already "
                              "in their zone (docs/training.md). Default 1")
+    parser.add_argument("--patience-weight", type=float, default=1.0, metavar="W",
+                        help="multiply by W the weight of each sample whose label is the teacher going, having "
+                             "stood out --teacher-patience, although a car with priority is near: about 0.2%% of "
+                             "the hard teacher's car-steps, the 'wait, then go' students have not learnt (pair it "
+                             "with --standing-input, so the network sees how long it has stood). Default 1")
     parser.add_argument("--priority-exponent", type=float, default=0.0, metavar="ALPHA",
                         help="draw training samples with probability proportional to (the student's acceleration "
                              "error + 0.15 m/s2) ** ALPHA, measured when it drove past them and each time they are "
@@ -131,7 +136,7 @@ SCRIPTED_TEACHER_FLAGS = {"teacher_sight": "--teacher-sight", "teacher_approach_
                           "teacher_break_wait_cycles": "--teacher-break-wait-cycles",
                           "teacher_patience_s": "--teacher-patience",
                           "teacher_blocker_patience_s": "--teacher-blocker-patience",
-                          "blocker_weight": "--blocker-weight"}
+                          "blocker_weight": "--blocker-weight", "patience_weight": "--patience-weight"}
 
 
 def _network_sizes(text: str) -> tuple[int, int, int]:
@@ -171,6 +176,11 @@ def run(args) -> int:
     if args.blocker_weight != 1.0 and not args.teacher_brake_for_blockers:
         raise ValueError("--blocker-weight weighs the teacher's braking for blockers: it goes with "
                          "--teacher-brake-for-blockers")
+    if not 0.0 < args.patience_weight < float("inf"):
+        raise ValueError(f"--patience-weight must be > 0, got {args.patience_weight}")
+    if args.patience_weight != 1.0 and args.teacher_patience == float("inf"):
+        raise ValueError("--patience-weight weighs the teacher's going once its patience ran out: it needs a "
+                         "finite --teacher-patience")
     if not 0.0 <= args.priority_exponent < float("inf"):
         raise ValueError(f"--priority-exponent must be >= 0 (0: uniform sampling), got {args.priority_exponent}")
     if args.teacher_approach_speed is not None and not 0.0 < args.teacher_approach_speed < float("inf"):
@@ -216,7 +226,8 @@ def run(args) -> int:
         teacher_break_wait_cycles=args.teacher_break_wait_cycles,
         teacher_patience_s=args.teacher_patience, teacher_blocker_patience_s=args.teacher_blocker_patience,
         teacher_half_life=args.teacher_half_life,
-        brake_weight=args.brake_weight, blocker_weight=args.blocker_weight, priority_exponent=args.priority_exponent,
+        brake_weight=args.brake_weight, blocker_weight=args.blocker_weight, patience_weight=args.patience_weight,
+        priority_exponent=args.priority_exponent,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
         torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network,
         standing_input=args.standing_input, teacher_checkpoint=args.teacher_checkpoint)
