@@ -164,6 +164,16 @@ def test_burst_waits_accounts_for_every_second_of_every_episode():
             assert reasons["moving"] > 0.5 * total
 
 
+def test_patience_labels_counts_nested_kinds_of_standing():
+    report = _run_script("patience_labels.py", "--delay-max", "10", "--episodes", "60", "--seed", "5")
+    counts = report["counts"]
+    assert report["driver"]["scripted_patience_s"] == 4.0
+    assert counts["car_steps"] > counts["standing_for_priority"] > 0  # dense traffic: cars wait for priority
+    assert counts["standing_for_priority"] >= counts.get("patience_out_priority", 0) >= counts.get(
+        "patience_out_priority_goes", 0)
+    assert 0 <= counts["released_labels"] < 0.05 * counts["car_steps"]
+
+
 def test_waiting_cars_prints_the_road_for_a_policy_too():
     result = subprocess.run([sys.executable, str(ROOT / "docs/scripts/waiting_cars.py"), "--scenario", "easy",
                              "--episodes", "4", "--delay-max", "3", "--checkpoint", "models/easy-student-guard.pt"],
