@@ -56,6 +56,18 @@ def standing_reason(sim: Simulator, slot: int, idx: np.ndarray, higher: np.ndarr
     return "+".join(sorted(kinds)) or "other"
 
 
+def standing_reasons(sim: Simulator, slots: list[int], entry_lane: np.ndarray) -> dict[int, str]:
+    """For each car in ``slots``: "moving", or why it stands (``standing_reason``), judged by what
+    a learner's view square shows."""
+    idx = np.flatnonzero(sim.present)
+    higher = sim.priorities(idx)
+    ego, views = idx[:, None], sim.spec.views
+    sight = may_show(sim.x[ego], sim.y[ego], sim.heading[ego], sim.x[idx][None, :], sim.y[idx][None, :],
+                     views.extent_m, views.shift_m)
+    return {slot: standing_reason(sim, slot, idx, higher, sight, entry_lane) if sim.speed[slot] < STANDING_MPS
+            else "moving" for slot in slots}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--delay-max", type=float, default=30.0, help="[s]")
@@ -73,7 +85,6 @@ def main() -> None:
     driver = ScriptDriver(sim, options, args.checkpoint)
     junction = sim.intersection
     entry_lane = np.array([r.entry_lane for r in junction.routes])
-    views = sim.spec.views
     started_s = {v: sim.time_s for v in np.flatnonzero(result.started).tolist()}
     seconds: dict[int, collections.Counter] = collections.defaultdict(collections.Counter)  # slot -> reason -> s
     redraws_s: list[float] = []
@@ -86,16 +97,9 @@ def main() -> None:
         return start is not None and any(0.0 < start - r <= BURST_WINDOW_S + 1e-9 for r in redraws_s[-2:])
 
     while done < args.episodes:
-        idx = np.flatnonzero(sim.present)
         learners = np.flatnonzero(sim.learners_present).tolist()
         if learners:
-            higher = sim.priorities(idx)
-            ego = idx[:, None]
-            sight = may_show(sim.x[ego], sim.y[ego], sim.heading[ego], sim.x[idx][None, :], sim.y[idx][None, :],
-                             views.extent_m, views.shift_m)
-            for slot in learners:
-                standing = sim.speed[slot] < STANDING_MPS
-                reason = standing_reason(sim, slot, idx, higher, sight, entry_lane) if standing else "moving"
+            for slot, reason in standing_reasons(sim, learners, entry_lane).items():
                 seconds[slot][reason] += DT
             for slot in learners:
                 stood = sum(s for r, s in seconds[slot].items() if r != "moving")

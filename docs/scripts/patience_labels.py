@@ -4,7 +4,7 @@
 
 Drives hard with the hard students' teacher and counts, over every car-step, the steps where the
 car stands (under ``STANDING_MPS``) for a car with priority in sight within the yield horizon
-(``burst_waits.standing_reason``), those where it has also stood out ``PATIENCE_S``, and those
+(``burst_waits.standing_reasons``), those where it has also stood out ``PATIENCE_S``, and those
 where it then goes (``ScriptedDriver.patience_released``, the labels ``crossway pretrain
 --patience-weight`` counts more). Prints one JSON line.
 """
@@ -17,11 +17,10 @@ import json
 
 import numpy as np
 
-from burst_waits import standing_reason
+from burst_waits import standing_reasons
 from evaluation.table1 import OUTCOMES
-from simcore.controller import PATIENCE_S, STANDING_MPS, DriverOptions, scripted_driver
+from simcore.controller import PATIENCE_S, DriverOptions, scripted_driver
 from simcore.simulator import SimConfig, Simulator
-from simcore.views import may_show
 
 
 def main() -> None:
@@ -36,25 +35,17 @@ def main() -> None:
                             wait_outside_zones=True, break_wait_cycles=True)
     teacher = scripted_driver(sim, options)
     entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])
-    views = sim.spec.views
     counts: collections.Counter = collections.Counter()
     done = 0
     while done < args.episodes:
-        idx = np.flatnonzero(sim.present)
         learners = np.flatnonzero(sim.learners_present).tolist()
         stood_s = teacher._standing_s.copy()  # before this act()
         actions = teacher.act()
         if learners:
-            higher = sim.priorities(idx)
-            ego = idx[:, None]
-            sight = may_show(sim.x[ego], sim.y[ego], sim.heading[ego], sim.x[idx][None, :], sim.y[idx][None, :],
-                             views.extent_m, views.shift_m)
-            for slot in learners:
+            for slot, reason in standing_reasons(sim, learners, entry_lane).items():
                 counts["car_steps"] += 1
                 counts["released_labels"] += int(teacher.patience_released[slot])
-                if sim.speed[slot] >= STANDING_MPS:
-                    continue
-                if "priority" in standing_reason(sim, slot, idx, higher, sight, entry_lane):
+                if "priority" in reason:
                     counts["standing_for_priority"] += 1
                     if stood_s[slot] >= PATIENCE_S - 1e-9:
                         counts["patience_out_priority"] += 1
