@@ -10,7 +10,8 @@ speed, if faster). Judging by the target speed rather than the current one matte
 priority that waits at its own line for a third car is near, not far, and going ahead of it is
 an infraction in the paper's right-of-way test (Table II; ``evaluation.right_of_way``). After
 waiting ``PATIENCE_S`` at a stand it goes anyway, which breaks the rare priority cycles (three
-arms with equal signs).
+arms with equal signs); after each ``act()``, ``patience_released`` says which cars go so although
+a car with priority is near (``crossway pretrain --patience-weight`` counts those labels more).
 
 With ``sight_m`` set it only yields to cars with priority that may show in the square of that
 half-side around it, aligned with its heading (their centre within half a car length of it;
