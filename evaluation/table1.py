@@ -36,6 +36,13 @@ CHUNK_EPISODES = 500  # a test's episodes per worker job
 STARTS = ("burst", "staggered")
 BURST_WINDOW_S = 2 * DT  # [s]
 
+
+def began_in_burst(start_s: float | None, redraws_s: list[float]) -> bool:
+    """Whether an episode that began at ``start_s`` (None: before anything was recorded) began in
+    the burst after a sign redraw (``redraws_s``: when they were due, oldest first). The last two
+    suffice: an episode can end in the very step of a redraw, before the next one."""
+    return start_s is not None and any(0.0 < start_s - r <= BURST_WINDOW_S + 1e-9 for r in redraws_s[-2:])
+
 # Table I of the paper: per scenario and sign, (reaches, crashes, off-roads, time-overs, speed m/s)
 PAPER_TABLE1 = {
     "easy": {"none": (0.998, 0.002, 0.0, 0.0, 8.533), "yield": (0.995, 0.005, 0.0, 0.0, 8.280),
@@ -97,8 +104,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
                 continue  # cut short by a sign change: not an outcome
             counts[episode.sign][episode.end_reason] += 1
             speed_sum[episode.sign] += episode.mean_speed_mps
-            burst = start_s is not None and any(0.0 < start_s - r <= BURST_WINDOW_S + 1e-9 for r in redraws_s[-2:])
-            by_start["burst" if burst else "staggered"][episode.sign][episode.end_reason] += 1
+            by_start["burst" if began_in_burst(start_s, redraws_s) else "staggered"][episode.sign][episode.end_reason] += 1
             done += 1
             if progress is not None and done % 25 == 0:
                 progress.put(25)

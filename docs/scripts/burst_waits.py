@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from script_driver import ScriptDriver, add_checkpoint_argument, needs_views
-from evaluation.table1 import BURST_WINDOW_S, OUTCOMES
+from evaluation.table1 import OUTCOMES, began_in_burst
 from simcore.controller import STANDING_MPS, YIELD_HORIZON_S, DriverOptions
 from simcore.dynamics import DT, VEHICLE_LENGTH
 from simcore.simulator import SimConfig, Simulator
@@ -92,10 +92,6 @@ def main() -> None:
     episodes: collections.Counter = collections.Counter()
     snapshots = done = 0
 
-    def began_in_burst(slot: int) -> bool:
-        start = started_s.get(slot)
-        return start is not None and any(0.0 < start - r <= BURST_WINDOW_S + 1e-9 for r in redraws_s[-2:])
-
     while done < args.episodes:
         learners = np.flatnonzero(sim.learners_present).tolist()
         if learners:
@@ -104,7 +100,7 @@ def main() -> None:
             for slot in learners:
                 stood = sum(s for r, s in seconds[slot].items() if r != "moving")
                 if (snapshots < args.snapshots and abs(sim.steps[slot] * DT - SNAPSHOT_S) < 0.5 * DT
-                        and stood >= SNAPSHOT_STOOD_S and began_in_burst(slot)):
+                        and stood >= SNAPSHOT_STOOD_S and began_in_burst(started_s.get(slot), redraws_s)):
                     snapshots += 1
                     print(f"--- car {slot} began in a burst and has stood {stood:.1f} of {SNAPSHOT_S:g} s:")
                     for v in learners:
@@ -118,7 +114,7 @@ def main() -> None:
         if sim.next_sign_change_s != next_redraw_s:
             redraws_s.append(next_redraw_s)
         for episode in result.episodes:
-            kind = "burst" if began_in_burst(episode.slot) else "staggered"
+            kind = "burst" if began_in_burst(started_s.get(episode.slot), redraws_s) else "staggered"
             started_s.pop(episode.slot, None)
             reasons = seconds.pop(episode.slot, collections.Counter())
             if episode.end_reason not in OUTCOMES:
