@@ -90,6 +90,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
     counts: dict[str, Counter] = defaultdict(Counter)
     by_start: dict[str, dict[str, Counter]] = {kind: defaultdict(Counter) for kind in STARTS}
     speed_sum: Counter = Counter()
+    cut: Counter = Counter()  # sign -> episodes cut short by a sign redraw (not counted)
     started_s = {v: sim.time_s for v in np.flatnonzero(result.started).tolist()}  # slot -> its episode's start [s]
     redraws_s: list[float] = []  # when the signs were redrawn and every lane restarted [s]
     done = 0
@@ -101,6 +102,8 @@ def run_test(spec: TestSpec, progress=None) -> dict:
         for episode in result.episodes:
             start_s = started_s.pop(episode.slot, None)
             if episode.end_reason not in OUTCOMES or done >= spec.episodes:
+                if episode.end_reason == "sign_change" and done < spec.episodes:
+                    cut[episode.sign] += 1
                 continue  # cut short by a sign change: not an outcome
             counts[episode.sign][episode.end_reason] += 1
             speed_sum[episode.sign] += episode.mean_speed_mps
@@ -113,7 +116,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
     if progress is not None and done % 25:
         progress.put(done % 25)
     return {"delay_max_s": spec.delay_max_s, "counts": {s: dict(c) for s, c in counts.items()},
-            "speed_sum": dict(speed_sum),
+            "speed_sum": dict(speed_sum), "cut_by_redraw": dict(cut),
             "counts_by_start": {k: {s: dict(c) for s, c in v.items()} for k, v in by_start.items()}}
 
 
@@ -130,10 +133,12 @@ def merge_chunks(parts: list[dict]) -> list[dict]:
     merged: dict[float, dict] = {}
     for part in parts:
         test = merged.setdefault(part["delay_max_s"], {"delay_max_s": part["delay_max_s"], "counts": {},
-                                                       "speed_sum": {}})
+                                                       "speed_sum": {}, "cut_by_redraw": {}})
         add_counts(test["counts"], part["counts"])
         for sign, speed in part["speed_sum"].items():
             test["speed_sum"][sign] = test["speed_sum"].get(sign, 0.0) + speed
+        for sign, count in part.get("cut_by_redraw", {}).items():  # absent in results kept before session 30
+            test["cut_by_redraw"][sign] = test["cut_by_redraw"].get(sign, 0) + count
         for kind, counts in part.get("counts_by_start", {}).items():  # absent in results kept before session 28
             add_counts(test.setdefault("counts_by_start", {}).setdefault(kind, {}), counts)
     return list(merged.values())
@@ -275,22 +280,33 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
     starts_csv_path.write_text("\n".join(lines) + "\n")
     md_path = stem.with_suffix(".md")
     page = (f"# Table I, {scenario}\n\n{meta['command']}\n\n{platform_line(meta['platform'])}\n\n"
-            + markdown(scenario, table)
-            + "\n## Per test\n\n" + markdown_tests(test_rows))
-    if "burst" in starts:  # signs redrawn during the tests (hard): every lane restarted together
-        page += ("\n## By how the episodes began\n\nburst: within two steps of a sign redraw, when every "
-                 "lane starts at once; staggered: every other episode. All tests pooled.\n\n" + markdown_starts(starts))
+            + markdown(scenario, table))
+    cut = sum(sum(t.get("cut_by_redraw", {}).values()) for t in tests)
+    if cut:  # signs redrawn during the tests (hard)
+        counted = sum(sum(c.values()) for t in tests for c in t["counts"].values())
+        page += (f"\nEpisodes cut short by a sign redraw, not counted above: {cut} ({cut / (cut + counted):.1%} "
+                 f"of those that ended; after a redraw the cars restart {meta.get('sign_change_restart')}).\n")
+    page += "\n## Per test\n\n" + markdown_tests(test_rows)
+    if "burst" in starts:  # signs redrawn during the tests (hard)
+        when = ("when every lane starts at once" if meta.get("sign_change_restart") == "together"
+                else "each lane after its own random delay, a short one here")
+        page += (f"\n## By how the episodes began\n\nburst: within two steps of a sign redraw ({when}); "
+                 "staggered: every other episode. All tests pooled.\n\n" + markdown_starts(starts))
     md_path.write_text(page)
     return [json_path, csv_path, tests_csv_path, starts_csv_path, md_path]
 
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
-               out_dir: Path, command: str, scripted: DriverOptions | None = None) -> dict:
+               out_dir: Path, command: str, scripted: DriverOptions | None = None,
+               sign_restart: str | None = None) -> dict:
     """The whole protocol in parallel workers (``scripted``: the scripted driver's options when
-    ``checkpoint`` is None); writes JSON, CSV and Markdown into ``out_dir``."""
+    ``checkpoint`` is None; ``sign_restart``: overrides the scenario's ``episodes.sign_change_restart``);
+    writes JSON, CSV and Markdown into ``out_dir``."""
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
+    if sign_restart is not None:
+        spec = replace(spec, episodes=replace(spec.episodes, sign_change_restart=sign_restart))
     if checkpoint is not None:
         from evaluation.policy import check_checkpoint
 
@@ -312,6 +328,9 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
     table = summarise(results)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
             "delays_max_s": [t.delay_max_s for t in tests], "seed": seed, "workers": workers,
+            # signs redrawn at this interval [s] (0: never) and how the cars restart after a redraw
+            "sign_change_interval_s": spec.episodes.sign_change_interval_s,
+            "sign_change_restart": spec.episodes.sign_change_restart,
             **(scripted.record() if checkpoint is None else dict.fromkeys(scripted.record())),
             # the view square's half-side and shift [m]: what "view" limits the scripted driver to
             "scripted_sight_m": 0.5 * spec.views.extent_m if scripted.sight == "view" else None,

@@ -46,6 +46,9 @@ class BranchSpec:
     lane_turns: tuple[tuple[str, ...], ...] = ()
 
 
+SIGN_CHANGE_RESTARTS = ("delayed", "together")  # EpisodeSpec.sign_change_restart
+
+
 @dataclass(frozen=True)
 class EpisodeSpec:
     """Episode timing (paper, "Training settings")."""
@@ -53,9 +56,14 @@ class EpisodeSpec:
     delay_min_s: float = 0.0  # lower end of the random wait between an agent's episodes [s]
     delay_max_s: float = 30.0  # upper end of that wait [s]; lower means denser traffic
     time_limit_s: float = 40.0  # an episode longer than this ends as "time over" [s]
-    # > 0: every branch's sign is redrawn at this interval and every agent restarts together
+    # > 0: every branch's sign is redrawn at this interval and every agent's episode restarts
     # (the paper's rule for "hard"); 0: each agent draws its sign when its episode starts.
     sign_change_interval_s: float = 0.0
+    # how the agents start again after a redraw: "delayed", each waits U[delay_min, delay_max] as
+    # after any episode (paper, "Training settings": every agent waits a random delay before a new
+    # episode); "together", every agent starts at the next step (crossway's reading until session 30:
+    # eight cars at once, the right-of-way test's situation inside Table I)
+    sign_change_restart: str = "delayed"
 
 
 @dataclass(frozen=True)
@@ -152,11 +160,17 @@ def parse_scenario(data: dict[str, Any], source: str = "<mapping>") -> ScenarioS
 
     episodes_data = _sub_table(data, "episodes", EpisodeSpec, problems)
     defaults = EpisodeSpec()
-    episode_values = {
+    episode_values: dict[str, Any] = {
         f.name: _number(episodes_data.get(f.name, getattr(defaults, f.name)), f"episodes.{f.name}",
                         problems, 0.0)
-        for f in fields(EpisodeSpec)
+        for f in fields(EpisodeSpec) if f.name != "sign_change_restart"
     }
+    restart = episodes_data.get("sign_change_restart", defaults.sign_change_restart)
+    if restart not in SIGN_CHANGE_RESTARTS:
+        problems.append(f"episodes.sign_change_restart: expected one of {', '.join(SIGN_CHANGE_RESTARTS)}, "
+                        f"got {restart!r}")
+        restart = defaults.sign_change_restart
+    episode_values["sign_change_restart"] = restart
     if episode_values["time_limit_s"] == 0.0:
         problems.append("episodes.time_limit_s: must be > 0")
     if episode_values["delay_min_s"] > episode_values["delay_max_s"]:

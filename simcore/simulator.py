@@ -47,7 +47,7 @@ from simcore.rewards import (
     terminal_rewards,
 )
 from simcore.rightofway import SIGN_NAMES, Sign, build_priority_table, draw_signs, redraw_one_sign
-from simcore.scenario import Intersection, ScenarioSpec, build_intersection, load_scenario
+from simcore.scenario import SIGN_CHANGE_RESTARTS, Intersection, ScenarioSpec, build_intersection, load_scenario
 from simcore.views import EGO_OR_LOWER, HIGHER_PRIORITY, VIEW_SIZE_PX, ViewRenderer
 
 HISTORY = 4  # frames per channel (paper, Fig. 3)
@@ -64,6 +64,7 @@ class SimConfig:
     delay_max_s: float | None = None  # longest random wait between an agent's episodes [s]
     time_limit_s: float | None = None  # episode time limit [s]
     sign_change_interval_s: float | None = None  # > 0: redraw all signs together at this interval [s]
+    sign_change_restart: str | None = None  # after a redraw: "delayed" (random waits) or "together"
     lanes: tuple[str, ...] | None = None  # entry lanes that host agents (e.g. ("south_0",)); None: all
     start_all_at_reset: bool = True  # reset starts an episode on every lane at once
     observe: bool = True  # render views; False skips them (scripted policies, fast evaluation)
@@ -150,7 +151,12 @@ class Simulator:
         self.time_limit_s = episodes.time_limit_s if config.time_limit_s is None else config.time_limit_s
         self.sign_interval_s = (episodes.sign_change_interval_s if config.sign_change_interval_s is None
                                 else config.sign_change_interval_s)
+        self.sign_restart = (episodes.sign_change_restart if config.sign_change_restart is None
+                             else config.sign_change_restart)
         problems = []
+        if self.sign_restart not in SIGN_CHANGE_RESTARTS:
+            problems.append(f"sign_change_restart must be one of {', '.join(SIGN_CHANGE_RESTARTS)}, "
+                            f"got {self.sign_restart!r}")
         if not 0.0 <= self.delay_min_s <= self.delay_max_s:
             problems.append(f"delays must satisfy 0 <= delay_min_s <= delay_max_s, got "
                             f"{self.delay_min_s}, {self.delay_max_s}")
@@ -503,10 +509,14 @@ class Simulator:
             self.wait_until[: self.num_slots][ended] = self.time_s + delays
 
     def _redraw_all_signs(self) -> None:
+        """New signs on every arm; every learner's episode restarts (paper, "Environment")."""
         self.branch_signs = draw_signs(self._rng, len(self.branch_signs))
         self.next_sign_change_s += self.sign_interval_s
-        # every learner restarts together at the next step (paper, "Environment")
-        self.wait_until[: self.num_slots] = self.time_s + DT
+        if self.sign_restart == "together":  # all at the next step: eight cars at once on "hard"
+            self.wait_until[: self.num_slots] = self.time_s + DT
+        else:  # each waits U[delay_min, delay_max] from now, as after any episode ("Training settings")
+            delays = self._rng.uniform(self.delay_min_s, self.delay_max_s, self.num_slots)
+            self.wait_until[: self.num_slots] = self.time_s + np.maximum(delays, DT)
 
     def _start_due(self, result: StepResult, blocked: np.ndarray) -> None:
         due = ~self.present & ~blocked & (self.wait_until <= self.time_s + 1e-9)

@@ -113,6 +113,16 @@ def test_crash_kinds_drives_the_hard_teacher_with_its_options():
     assert sum(report["outcomes"].values()) == report["episodes"] >= 20
 
 
+def _hard_restarting(restart: str):
+    """The hard scenario with its cars restarting after a sign redraw as ``restart`` says."""
+    from dataclasses import replace
+
+    from simcore.scenario import load_scenario
+
+    spec = load_scenario("hard")
+    return replace(spec, episodes=replace(spec.episodes, sign_change_restart=restart))
+
+
 def test_burst_starts_splits_table1s_own_episodes_by_how_they_began():
     from evaluation.table1 import TestSpec, run_test
     from simcore.controller import DriverOptions
@@ -120,14 +130,16 @@ def test_burst_starts_splits_table1s_own_episodes_by_how_they_began():
     teacher = ("--brake-for-blockers", "--wait-outside-zones", "--break-wait-cycles")
     # 90 episodes at delay_max 10 s outlast the first redraw (120 s) of the hard junction's signs
     report = _run_script("burst_starts.py", "--delays", "10", "--episodes", "90", "--workers", "1", "--seed", "5",
-                         *teacher)
+                         "--sign-restart", "together", *teacher)
     assert report["driver"]["scripted_wait_outside_zones"] and report["sign_change_interval_s"] == 120.0
+    assert report["sign_change_restart"] == "together"
     split = report["counts"]
     assert report["summary"]["burst/all"]["episodes"] > 0 and report["summary"]["staggered/all"]["episodes"] > 0
     # the same episodes crossway evaluate table1 counts for that test (same seed), only split in two
     options = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
                             wait_outside_zones=True, break_wait_cycles=True)
-    table1 = run_test(TestSpec("hard", 10.0, 90, seed=5, checkpoint=None, scripted=options))["counts"]
+    table1 = run_test(TestSpec(_hard_restarting("together"), 10.0, 90, seed=5, checkpoint=None,
+                               scripted=options))["counts"]
     for sign, outcomes in table1.items():
         for outcome, n in outcomes.items():
             assert split["burst"].get(sign, {}).get(outcome, 0) + split["staggered"].get(sign, {}).get(outcome, 0) == n
@@ -142,7 +154,8 @@ def test_burst_waits_accounts_for_every_second_of_every_episode():
     from simcore.dynamics import DT
 
     # 90 episodes at delay_max 10 s outlast the first redraw (120 s): both kinds of start occur
-    report = _run_script("burst_waits.py", "--delay-max", "10", "--episodes", "90", "--seed", "5", "--snapshots", "0")
+    report = _run_script("burst_waits.py", "--delay-max", "10", "--episodes", "90", "--seed", "5", "--snapshots", "0",
+                         "--sign-restart", "together")
     counts, seconds = report["counts"], report["mean_seconds_by_reason"]
     assert report["driver"]["scripted_break_wait_cycles"] and sum(
         n for group, n in counts.items() if group.count("/") == 1) == 90
@@ -150,7 +163,8 @@ def test_burst_waits_accounts_for_every_second_of_every_episode():
     # the teacher drives as in crossway evaluate table1 with the same seed: the same outcomes
     options = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
                             wait_outside_zones=True, break_wait_cycles=True)
-    table1 = run_test(TestSpec("hard", 10.0, 90, seed=5, checkpoint=None, scripted=options))["counts"]
+    table1 = run_test(TestSpec(_hard_restarting("together"), 10.0, 90, seed=5, checkpoint=None,
+                               scripted=options))["counts"]
     for sign, outcomes in table1.items():
         for outcome, n in outcomes.items():
             assert sum(counts.get(f"{kind}/{sign}/{outcome}", 0) for kind in ("burst", "staggered")) == n

@@ -63,11 +63,14 @@ def test_table1_scripted_end_to_end(tmp_path):
 
 def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
     """Hard redraws its signs every 120 s and restarts every lane: Table I says how the episodes
-    that began in such a burst did, apart from the others (none of them on easy)."""
+    that began right after a redraw did, apart from the others (none of them on easy). With
+    --sign-restart together every lane starts at once then, a burst of eight; by default each
+    waits its own random delay, and few episodes begin within two steps of a redraw."""
     result = crossway("evaluate", "table1", "--scripted", "--scenario", "hard", "--episodes", "40",
-                      "--workers", "2", "--out", str(tmp_path))
+                      "--workers", "2", "--sign-restart", "together", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
     report = json.loads((tmp_path / "table1-hard.json").read_text())
+    assert report["meta"]["sign_change_restart"] == "together" and report["meta"]["sign_change_interval_s"] == 120
     starts = report["by_start"]
     assert starts["burst"]["all"]["episodes"] > 0 and starts["staggered"]["all"]["episodes"] > 0
     assert starts["burst"]["all"]["episodes"] + starts["staggered"]["all"]["episodes"] == 400
@@ -80,7 +83,20 @@ def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
     lines = list(csv.DictReader(open(tmp_path / "table1-hard-starts.csv")))
     assert list(lines[0]) == ["began", "sign", "episodes", "goal", "crash", "off_path", "time_over"]
     assert {r["began"] for r in lines} == {"burst", "staggered"}
-    assert "## By how the episodes began" in (tmp_path / "table1-hard.md").read_text()
+    assert "when every lane starts at once" in (tmp_path / "table1-hard.md").read_text()
+
+    delayed = crossway("evaluate", "table1", "--scripted", "--scenario", "hard", "--episodes", "40",
+                       "--workers", "2", "--out", str(tmp_path / "delayed"))
+    assert delayed.returncode == 0, delayed.stderr
+    report = json.loads((tmp_path / "delayed" / "table1-hard.json").read_text())
+    assert report["meta"]["sign_change_restart"] == "delayed"  # the scenario file's default
+    bursts = report["by_start"].get("burst", {}).get("all", {}).get("episodes", 0)
+    assert bursts + report["by_start"]["staggered"]["all"]["episodes"] == 400
+    assert bursts < starts["burst"]["all"]["episodes"] / 4  # the cars no longer start together
+    cut = sum(sum(t["cut_by_redraw"].values()) for t in report["tests"])
+    assert cut > 0  # 40 episodes a test outlast a redraw; those cut short are counted apart
+    assert f"Episodes cut short by a sign redraw, not counted above: {cut} (" in (
+        tmp_path / "delayed" / "table1-hard.md").read_text()
 
     easy = crossway("evaluate", "table1", "--scripted", "--scenario", "easy", "--episodes", "5", "--workers", "1",
                     "--out", str(tmp_path / "easy"))

@@ -88,6 +88,7 @@ def test_hard_has_eight_lanes_without_lane_changes(built):
         assert offset == pytest.approx((lane.lane + 0.5) * spec.lane_width_m)
     assert (spec.episodes.delay_min_s, spec.episodes.delay_max_s) == (0.0, 100.0)
     assert spec.episodes.sign_change_interval_s > 0
+    assert spec.episodes.sign_change_restart == "delayed"  # each agent then waits its random delay
 
 
 @pytest.mark.parametrize("name", ["easy", "medium", "hard"])
@@ -199,6 +200,8 @@ def test_custom_file_loads(tmp_path):
     (lambda t: t.replace("[episodes]", "[views]\nwidth_m = 60.0\n[episodes]"),
      "views.width_m: unknown field"),
     (lambda t: t.replace('name = "custom"', 'name = "custom"\nviews = 70'), "views: expected a table"),
+    (lambda t: t.replace("delay_max_s = 20.0", "delay_max_s = 20.0\nsign_change_restart = 'soon'"),
+     "episodes.sign_change_restart: expected one of delayed, together, got 'soon'"),
 ])
 def test_bad_files_name_the_field(tmp_path, edit, field):
     file = tmp_path / "bad.toml"

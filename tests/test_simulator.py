@@ -8,7 +8,7 @@ import pytest
 from conftest import empty_simulator, place, route_index, still
 from simcore.controller import (APPROACH_DECELERATION, BLOCKER_PATIENCE_S, PATIENCE_S, SPEED_GAIN, STOP_MARGIN_M, DriverOptions,
                                 ScriptedDriver, scripted_driver)
-from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
+from simcore.dynamics import DT, MAX_ACCELERATION, MAX_STEERING, VEHICLE_LENGTH, WHEELBASE
 from simcore.rewards import EndReason
 from simcore.simulator import SimConfig, Simulator
 
@@ -176,7 +176,8 @@ def test_one_agent_per_lane_and_random_waits():
 
 
 def test_hard_redraws_signs_and_restarts_everyone_together():
-    sim = Simulator("hard", SimConfig(sign_change_interval_s=3.0, delay_min_s=50.0, delay_max_s=60.0), seed=2)
+    sim = Simulator("hard", SimConfig(sign_change_interval_s=3.0, delay_min_s=50.0, delay_max_s=60.0,
+                                      sign_change_restart="together"), seed=2)
     sim.reset()
     driver = ScriptedDriver(sim)
     for _ in range(29):
@@ -192,6 +193,33 @@ def test_hard_redraws_signs_and_restarts_everyone_together():
         slot = sim.slot_lanes.index(lane.index)
         assert sim.sign[slot] == sim.branch_signs[lane.branch]
     assert len(set(sim.branch_signs.tolist())) > 1
+
+
+def test_hard_restarts_after_a_redraw_at_random_delays_by_default():
+    """The scenario's default: after a redraw each agent waits U[delay_min, delay_max] before its
+    new episode, as after any episode (paper, "Training settings"), instead of all at once."""
+    sim = Simulator("hard", SimConfig(sign_change_interval_s=3.0, delay_min_s=1.0, delay_max_s=2.0), seed=2)
+    assert sim.sign_restart == "delayed"
+    sim.reset()
+    driver = ScriptedDriver(sim)
+    for _ in range(30):  # to t = 3.0 s, the redraw
+        result = sim.step(driver.act())
+    assert result.truncated.any() and not sim.present.any()
+    redraw_s = sim.time_s
+    started_s = {}
+    while sim.time_s < redraw_s + 2.05:
+        result = sim.step(driver.act())
+        for slot in np.flatnonzero(result.started).tolist():
+            started_s.setdefault(slot, sim.time_s)
+    assert sorted(started_s) == list(range(sim.num_slots))  # every lane started again
+    waits = np.array(list(started_s.values())) - redraw_s
+    assert waits.min() >= 1.0 - 1e-9 and waits.max() <= 2.0 + DT + 1e-9  # U[1, 2] s, to the next step
+    assert len(set(np.round(waits, 3))) > 3  # at their own times, not in one burst
+
+
+def test_unknown_sign_change_restart_is_refused():
+    with pytest.raises(ValueError, match="sign_change_restart must be one of delayed, together"):
+        Simulator("hard", SimConfig(sign_change_restart="later"))
 
 
 def test_lanes_option_restricts_agents():

@@ -28,6 +28,11 @@ def add_parser(subparsers) -> None:
     _add_policy_options(table1, scripted=True, scenario=True)
     _add_scripted_options(table1)
     _add_run_options(table1, episodes=3000, episodes_help="episodes per test (the paper: 3000)")
+    table1.add_argument("--sign-restart", choices=("delayed", "together"), default=None,
+                        help="on a junction whose signs are redrawn at an interval (hard): after a redraw "
+                             "each car waits its random delay before its next episode ('delayed', the "
+                             "scenario file's default) or every car starts at the next step ('together', "
+                             "eight at once: crossway's reading until session 30; docs/evaluation.md)")
     table1.set_defaults(func=run_table1_command)
 
     rules = experiments.add_parser(
@@ -192,7 +197,7 @@ def run_table1_command(args) -> int:
 
     checkpoint = _checked(args)
     report = run_table1(args.scenario, checkpoint, args.episodes, args.workers, args.seed, args.out,
-                        _command_line(), **_scripted_options(args, checkpoint))
+                        _command_line(), **_scripted_options(args, checkpoint), sign_restart=args.sign_restart)
     print(markdown(report["meta"]["scenario"], report["table"]), end="")
     print("wrote " + ", ".join(str(p) for p in report["paths"]) + f" in {report['meta']['wall_s']} s")
     return 0

@@ -50,6 +50,9 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--sign-change-interval", type=float, default=None,
                         help="[s]; default: the scenario's; 0: signs never change")
+    parser.add_argument("--sign-restart", choices=("delayed", "together"), default=None,
+                        help="after a redraw: each car waits its random delay, or all start at once (the "
+                             "reading of sessions 28-29); default: the scenario's")
     parser.add_argument("--approach-speed", type=float, default=2.0, help="[m/s]; 0 or less: no approach rule")
     parser.add_argument("--approach-signs", choices=("all", "own"), default="own")
     parser.add_argument("--brake-for-blockers", action="store_true")
@@ -67,6 +70,8 @@ def main() -> None:
     spec = load_scenario(args.scenario)
     if args.sign_change_interval is not None:
         spec = replace(spec, episodes=replace(spec.episodes, sign_change_interval_s=args.sign_change_interval))
+    if args.sign_restart is not None:
+        spec = replace(spec, episodes=replace(spec.episodes, sign_change_restart=args.sign_restart))
     jobs = [TestSpec(spec, d, args.episodes, args.seed + i, args.checkpoint, driver_options(args))
             for i, d in enumerate(args.delays)]
     with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
@@ -82,6 +87,7 @@ def main() -> None:
             add_counts(counts[kind], by_sign)
     print(json.dumps({"driver": driver_record(args), "scenario": spec.name,
                       "sign_change_interval_s": spec.episodes.sign_change_interval_s,
+                      "sign_change_restart": spec.episodes.sign_change_restart,
                       "episodes_per_test": args.episodes, "seed": args.seed, "summary": summary,
                       "per_test": per_test, "counts": counts}))
 

@@ -74,11 +74,14 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=3000)
     parser.add_argument("--seed", type=int, default=2)
     parser.add_argument("--snapshots", type=int, default=1)
+    parser.add_argument("--sign-restart", choices=("delayed", "together"), default=None,
+                        help="after a redraw: each car waits its random delay, or all start at once (the "
+                             "reading of sessions 28-29); default: the scenario's")
     add_checkpoint_argument(parser)
     args = parser.parse_args()
 
-    sim = Simulator("hard", SimConfig(delay_min_s=0.0, delay_max_s=args.delay_max, observe=needs_views(args)),
-                    seed=args.seed)
+    sim = Simulator("hard", SimConfig(delay_min_s=0.0, delay_max_s=args.delay_max, observe=needs_views(args),
+                                      sign_change_restart=args.sign_restart), seed=args.seed)
     result = sim.reset()
     options = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
                             wait_outside_zones=True, break_wait_cycles=True)
