@@ -2,7 +2,8 @@
 
 For a scenario trained with delays up to D seconds, run tests with delay_min = 0 and delay_max
 = 10, 20, ..., D seconds (3 tests for easy, 5 for medium, 10 for hard); each test counts
-``episodes`` finished episodes (episodes cut short by a sign change are not counted). Per
+``episodes`` finished episodes (episodes cut short by a sign change are not counted, only
+reported as ``cut_by_redraw``). Per
 traffic sign, report the fractions of reaches, crashes, off-roads and time-overs and the
 average speed, each averaged over the tests.
 """
@@ -31,8 +32,8 @@ OUTCOMES = ("goal", "crash", "off_path", "time_over")
 COLUMN_NAMES = {"goal": "Reaches", "crash": "Crashes", "off_path": "Off-roads", "time_over": "Time-overs"}
 
 CHUNK_EPISODES = 500  # a test's episodes per worker job
-# how an episode began: within BURST_WINDOW_S after a sign redraw, when every lane of the hard
-# junction starts at once (paper, "Environment"), or at its own random delay
+# how an episode began: within BURST_WINDOW_S after a sign redraw of the hard junction (with
+# sign_change_restart "together" every lane starts then, eight cars at once), or otherwise
 STARTS = ("burst", "staggered")
 BURST_WINDOW_S = 2 * DT  # [s]
 

@@ -11,7 +11,8 @@ One step (100 ms, paper "Training settings"):
 2. project every car onto its route; rank who has priority over whom (``rightofway``);
 3. detect ends: crash, off path, goal, time over (in that precedence) and compute both reward
    streams (``rewards``);
-4. in "hard", redraw the signs at a fixed interval, cutting every episode short together;
+4. in "hard", redraw the signs at a fixed interval, cutting every episode short together (each
+   lane then waits its random delay, or with ``sign_change_restart = "together"`` starts at once);
 5. start new episodes on free lanes whose random wait is over (paper: U[delay_min, delay_max]);
 6. render the semantic views of every car on the road, ended ones included, and shift them into
    each agent's 4-frame history.

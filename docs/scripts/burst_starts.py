@@ -1,13 +1,14 @@
 """How hard's Table I outcomes split between episodes started together at a sign redraw and the rest.
 
     python docs/scripts/burst_starts.py [--scenario hard] [--delays 10 20 ... 100] [--episodes 300]
-        [--seed 0] [--workers 2] [--sign-change-interval 120] [--checkpoint CKPT]
+        [--seed 0] [--workers 2] [--sign-change-interval 120] [--sign-restart together] [--checkpoint CKPT]
         [--approach-speed 2 --approach-signs own --brake-for-blockers --wait-outside-zones --break-wait-cycles]
         [--patience 4] [--blocker-patience 8]
 
-The hard junction redraws its signs every ``episodes.sign_change_interval_s`` (120 s) and every
-lane starts a new episode at the next step (paper, "Environment"; docs/simulator.md), so part of
-each Table I test is synchronised starts, as in the right-of-way test. This drives the Table I
+The hard junction redraws its signs every ``episodes.sign_change_interval_s`` (120 s). With
+``--sign-restart together`` (crossway's reading until session 30) every lane then starts a new
+episode at the next step, so part of each Table I test is synchronised starts, as in the
+right-of-way test; by default each lane waits its random delay (docs/simulator.md). This drives the Table I
 set-up (delay_min 0, the same seeds as ``crossway evaluate table1 --episodes N --seed S`` for a
 test of at most 500 episodes) with the view-limited scripted driver (the hard students' teacher by
 default) or a trained policy, and counts the outcomes per sign of the episodes that began within
