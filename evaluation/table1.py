@@ -92,7 +92,11 @@ def run_test(spec: TestSpec, progress=None) -> dict:
     by_start: dict[str, dict[str, Counter]] = {kind: defaultdict(Counter) for kind in STARTS}
     speed_sum: Counter = Counter()
     cut: Counter = Counter()  # sign -> episodes cut short by a sign redraw (not counted)
+    # the counted episodes that began at least the time limit before the next redraw: no redraw
+    # could have cut them, so their outcomes are not thinned by the cut
+    uncuttable: dict[str, Counter] = defaultdict(Counter)
     started_s = {v: sim.time_s for v in np.flatnonzero(result.started).tolist()}  # slot -> its episode's start [s]
+    redraw_due_s = dict.fromkeys(started_s, sim.next_sign_change_s)  # slot -> the next redraw when it began [s]
     redraws_s: list[float] = []  # when the signs were redrawn and every lane restarted [s]
     done = 0
     while done < spec.episodes:
@@ -102,6 +106,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
             redraws_s.append(next_redraw_s)  # when it was due (also when the road stood empty)
         for episode in result.episodes:
             start_s = started_s.pop(episode.slot, None)
+            due_s = redraw_due_s.pop(episode.slot, None)
             if episode.end_reason not in OUTCOMES or done >= spec.episodes:
                 if episode.end_reason == "sign_change" and done < spec.episodes:
                     cut[episode.sign] += 1
@@ -109,15 +114,20 @@ def run_test(spec: TestSpec, progress=None) -> dict:
             counts[episode.sign][episode.end_reason] += 1
             speed_sum[episode.sign] += episode.mean_speed_mps
             by_start["burst" if began_in_burst(start_s, redraws_s) else "staggered"][episode.sign][episode.end_reason] += 1
+            if (sim.sign_interval_s > 0.0 and start_s is not None and due_s is not None
+                    and start_s + sim.time_limit_s + DT <= due_s + 1e-9):
+                uncuttable[episode.sign][episode.end_reason] += 1
             done += 1
             if progress is not None and done % 25 == 0:
                 progress.put(25)
         for slot in np.flatnonzero(result.started).tolist():
             started_s[slot] = sim.time_s
+            redraw_due_s[slot] = sim.next_sign_change_s
     if progress is not None and done % 25:
         progress.put(done % 25)
     return {"delay_max_s": spec.delay_max_s, "counts": {s: dict(c) for s, c in counts.items()},
             "speed_sum": dict(speed_sum), "cut_by_redraw": dict(cut),
+            "counts_uncuttable": {s: dict(c) for s, c in uncuttable.items()},
             "counts_by_start": {k: {s: dict(c) for s, c in v.items()} for k, v in by_start.items()}}
 
 
@@ -140,6 +150,7 @@ def merge_chunks(parts: list[dict]) -> list[dict]:
             test["speed_sum"][sign] = test["speed_sum"].get(sign, 0.0) + speed
         for sign, count in part.get("cut_by_redraw", {}).items():  # absent in results kept before session 30
             test["cut_by_redraw"][sign] = test["cut_by_redraw"].get(sign, 0) + count
+        add_counts(test.setdefault("counts_uncuttable", {}), part.get("counts_uncuttable", {}))
         for kind, counts in part.get("counts_by_start", {}).items():  # absent in results kept before session 28
             add_counts(test.setdefault("counts_by_start", {}).setdefault(kind, {}), counts)
     return list(merged.values())
@@ -150,19 +161,26 @@ def by_start(tests: list[dict]) -> dict:
     each outcome's fraction of them; {} for tests run without that record."""
     table: dict[str, dict] = {}
     for kind in STARTS:
-        pooled: dict[str, Counter] = defaultdict(Counter)
-        for test in tests:
-            for sign, counts in test.get("counts_by_start", {}).get(kind, {}).items():
-                pooled[sign].update(counts)
-                pooled["all"].update(counts)
-        rows = {}
-        for sign in (*SIGNS, "all"):
-            total = sum(pooled[sign].values())
-            if total:
-                rows[sign] = {"episodes": total, **{o: pooled[sign][o] / total for o in OUTCOMES}}
+        rows = pooled_rows([test.get("counts_by_start", {}).get(kind, {}) for test in tests])
         if rows:
             table[kind] = rows
     return table
+
+
+def pooled_rows(counts: list[dict[str, dict[str, int]]]) -> dict:
+    """Per sign (and "all"): the episodes of every ``counts`` (sign -> end reason -> episodes)
+    pooled, and each outcome's fraction of them; signs without episodes left out."""
+    pooled: dict[str, Counter] = defaultdict(Counter)
+    for by_sign in counts:
+        for sign, reasons in by_sign.items():
+            pooled[sign].update(reasons)
+            pooled["all"].update(reasons)
+    rows = {}
+    for sign in (*SIGNS, "all"):
+        total = sum(pooled[sign].values())
+        if total:
+            rows[sign] = {"episodes": total, **{o: pooled[sign][o] / total for o in OUTCOMES}}
+    return rows
 
 
 def markdown_starts(table: dict) -> str:
@@ -256,6 +274,7 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
     json_path = stem.with_suffix(".json")
     starts = by_start(tests)
     json_path.write_text(json.dumps({"meta": meta, "tests": tests, "table": table, "by_start": starts,
+                                     "uncuttable": pooled_rows([t.get("counts_uncuttable", {}) for t in tests]),
                                      "paper": PAPER_TABLE1.get(scenario)}, indent=2))
     csv_path = stem.with_suffix(".csv")
     paper = PAPER_TABLE1.get(scenario, {})
@@ -287,6 +306,12 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
         counted = sum(sum(c.values()) for t in tests for c in t["counts"].values())
         page += (f"\nEpisodes cut short by a sign redraw, not counted above: {cut} ({cut / (cut + counted):.1%} "
                  f"of those that ended; after a redraw the cars restart {meta.get('sign_change_restart')}).\n")
+        uncut = pooled_rows([t.get("counts_uncuttable", {}) for t in tests])
+        if uncut:
+            cells = " / ".join(f"{uncut[s]['goal']:.3f}" if s in uncut else "-" for s in SIGNS)
+            page += (f"Among the counted episodes that began at least the time limit before the next redraw, "
+                     f"which no redraw could cut ({uncut['all']['episodes']}, all tests pooled), reaches per "
+                     f"sign are {cells}.\n")
     page += "\n## Per test\n\n" + markdown_tests(test_rows)
     if "burst" in starts:  # signs redrawn during the tests (hard)
         when = ("when every lane starts at once" if meta.get("sign_change_restart") == "together"

@@ -95,8 +95,13 @@ def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
     assert bursts < starts["burst"]["all"]["episodes"] / 4  # the cars no longer start together
     cut = sum(sum(t["cut_by_redraw"].values()) for t in report["tests"])
     assert cut > 0  # 40 episodes a test outlast a redraw; those cut short are counted apart
-    assert f"Episodes cut short by a sign redraw, not counted above: {cut} (" in (
-        tmp_path / "delayed" / "table1-hard.md").read_text()
+    page = (tmp_path / "delayed" / "table1-hard.md").read_text()
+    assert f"Episodes cut short by a sign redraw, not counted above: {cut} (" in page
+    # the counted episodes that began 40 s or more before the next redraw: a subset, reported apart
+    uncut = report["uncuttable"]["all"]
+    assert 0 < uncut["episodes"] < 400 and sum(uncut[o] for o in ("goal", "crash", "off_path", "time_over")) == \
+        pytest.approx(1.0)
+    assert f"which no redraw could cut ({uncut['episodes']}, all tests pooled)" in page
 
     easy = crossway("evaluate", "table1", "--scripted", "--scenario", "easy", "--episodes", "5", "--workers", "1",
                     "--out", str(tmp_path / "easy"))
