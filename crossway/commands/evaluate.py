@@ -8,6 +8,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from simcore.scenario import SIGN_CHANGE_RESTARTS
+
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -28,7 +30,7 @@ def add_parser(subparsers) -> None:
     _add_policy_options(table1, scripted=True, scenario=True)
     _add_scripted_options(table1)
     _add_run_options(table1, episodes=3000, episodes_help="episodes per test (the paper: 3000)")
-    table1.add_argument("--sign-restart", choices=("delayed", "together"), default=None,
+    table1.add_argument("--sign-restart", choices=SIGN_CHANGE_RESTARTS, default=None,
                         help="on a junction whose signs are redrawn at an interval (hard): after a redraw "
                              "each car waits its random delay before its next episode ('delayed', the "
                              "scenario file's default) or every car starts at the next step ('together', "

@@ -26,7 +26,7 @@ from dataclasses import replace
 
 from evaluation.table1 import SIGNS, STARTS, TestSpec, add_counts, by_start, run_test
 from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S, DriverOptions
-from simcore.scenario import load_scenario
+from simcore.scenario import SIGN_CHANGE_RESTARTS, load_scenario
 
 
 def driver_options(args: argparse.Namespace) -> DriverOptions:
@@ -51,7 +51,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--sign-change-interval", type=float, default=None,
                         help="[s]; default: the scenario's; 0: signs never change")
-    parser.add_argument("--sign-restart", choices=("delayed", "together"), default=None,
+    parser.add_argument("--sign-restart", choices=SIGN_CHANGE_RESTARTS, default=None,
                         help="after a redraw: each car waits its random delay, or all start at once (the "
                              "reading of sessions 28-29); default: the scenario's")
     parser.add_argument("--approach-speed", type=float, default=2.0, help="[m/s]; 0 or less: no approach rule")

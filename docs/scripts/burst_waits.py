@@ -28,6 +28,7 @@ from script_driver import ScriptDriver, add_checkpoint_argument, needs_views
 from evaluation.table1 import OUTCOMES, began_in_burst
 from simcore.controller import STANDING_MPS, YIELD_HORIZON_S, DriverOptions
 from simcore.dynamics import DT, VEHICLE_LENGTH
+from simcore.scenario import SIGN_CHANGE_RESTARTS
 from simcore.simulator import SimConfig, Simulator
 from simcore.views import may_show
 
@@ -74,7 +75,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=3000)
     parser.add_argument("--seed", type=int, default=2)
     parser.add_argument("--snapshots", type=int, default=1)
-    parser.add_argument("--sign-restart", choices=("delayed", "together"), default=None,
+    parser.add_argument("--sign-restart", choices=SIGN_CHANGE_RESTARTS, default=None,
                         help="after a redraw: each car waits its random delay, or all start at once (the "
                              "reading of sessions 28-29); default: the scenario's")
     add_checkpoint_argument(parser)
