@@ -127,7 +127,14 @@ def use_portable_kernels() -> None:
     """Make the worker processes started from now on multiply on MKL's ``PORTABLE_MKL_BRANCH`` code
     path instead of the fastest one for this CPU, so that a seed gives the same episodes on every
     machine with it (``crossway evaluate --portable-kernels``). MKL reads ``MKL_CBWR`` when it
-    starts: it holds for the spawned workers, not for this process's torch if already loaded."""
+    starts: it holds for the spawned workers, not for this process's torch if already loaded.
+
+    Refuses (ValueError) where the environment already asks MKL for another code path: the user's
+    choice is not overwritten silently, and the JSON would not say which of the two was meant."""
+    chosen = os.environ.get("MKL_CBWR", "")
+    if chosen and chosen != PORTABLE_MKL_BRANCH:
+        raise ValueError(f"--portable-kernels sets MKL_CBWR={PORTABLE_MKL_BRANCH}, but the environment already "
+                         f"sets MKL_CBWR={chosen}: unset it (or drop --portable-kernels to keep it)")
     os.environ["MKL_CBWR"] = PORTABLE_MKL_BRANCH
 
 

@@ -549,6 +549,19 @@ def test_portable_kernels_reach_the_workers(monkeypatch):
     assert parallel.numeric_platform()["kernel_variables"] == {"MKL_CBWR": parallel.PORTABLE_MKL_BRANCH}
 
 
+def test_portable_kernels_refuse_another_mkl_code_path(monkeypatch):
+    """A user's own MKL_CBWR is not overwritten: --portable-kernels refuses, naming both values."""
+    from evaluation import parallel
+
+    monkeypatch.setenv("MKL_CBWR", "COMPATIBLE")
+    with pytest.raises(ValueError, match="MKL_CBWR=COMPATIBLE"):
+        parallel.use_portable_kernels()
+    assert os.environ["MKL_CBWR"] == "COMPATIBLE"
+    monkeypatch.setenv("MKL_CBWR", parallel.PORTABLE_MKL_BRANCH)  # the same choice twice is no conflict
+    parallel.use_portable_kernels()
+    assert os.environ["MKL_CBWR"] == parallel.PORTABLE_MKL_BRANCH
+
+
 def test_a_kept_result_that_does_not_read_is_run_again(tmp_path, capfd):
     from evaluation.parallel import cache_salt, job_key, run_parallel
     from evaluation.table1 import TestSpec, run_test

@@ -177,7 +177,8 @@ def _add_run_options(parser, episodes: int, episodes_help: str) -> None:
                         help="multiply on MKL's AVX2 code path (MKL_CBWR=AVX2) instead of the fastest one for this "
                              "CPU: a policy's numbers then repeat to the digit on every Intel CPU with AVX2, not "
                              "only on the same kind (MKL's documented guarantee); on an AVX-512 machine the network "
-                             "then runs 1.1x (one policy) to 1.45x (a seven-member ensemble) slower; "
+                             "then runs 1.1x (one policy) to 1.45x (a seven-member ensemble) slower; refused where "
+                             "MKL_CBWR is already set to something else; "
                              "docs/evaluation.md")
 
 
