@@ -208,7 +208,7 @@ def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: flo
     few (7% of car-steps on hard) and decide the crashes. ``blocker_weight`` multiplies the weight
     of each sample whose label is the teacher's braking for a car standing in its way
     (``batch["blocker"]``; a batch without that key has none): in the hard student's crossing
-    crashes the car with priority did not brake for the car already in their zone (docs/training.md,
+    crashes the car with priority did not brake for the car already in their zone (docs/imitation.md,
     session 21). ``patience_weight`` does the same for each sample whose label is the teacher going
     once it has stood out its patience although a car with priority is near (``batch["released"]``):
     0.2% of the hard teacher's car-steps, the "wait, then go" the students have not learnt (session 29).

@@ -44,7 +44,7 @@ would stop (for a car with priority, or for a blocker) leaves its body inside th
 crossing route, it stops before that zone instead (and so on, back to the first zone of a chain of
 overlapping ones). On hard the stop lines lie 21 m from the centre and the zones overlap, so a
 driver that stops right before each zone stands in others, and with ``brake_for_blockers`` the
-cars lock each other (docs/training.md, session 15). A car already inside such a zone stops where
+cars lock each other (docs/imitation.md, session 15). A car already inside such a zone stops where
 it had planned. The approach slowing then applies only at those stop points: a car that has
 entered a chain of zones crosses it at its cruising speed.
 
@@ -294,7 +294,7 @@ class ScriptedDriver:
                 # a car with priority that waits, through a chain of cars, for this one would wait
                 # for ever: every car of such a cycle stops yielding to the others in it (its braking
                 # for blockers and for cars ahead on a shared lane stays and keeps them apart;
-                # freeing only one car per cycle measured worse on hard: docs/training.md)
+                # freeing only one car per cycle measured worse on hard: docs/imitation.md)
                 for other, braking in brakings:
                     if slot not in _reachable(waits_for, other):
                         actions[slot, 0] = min(actions[slot, 0], braking)

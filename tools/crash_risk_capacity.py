@@ -6,7 +6,7 @@ its car crashes within ``--horizon`` steps, and trains the acceleration sub-modu
 weights or from a checkpoint's acceleration head. Prints the held-out ROC AUC per epoch as JSON
 lines. If the network learns this quickly while RL's critic does not
 (``crossway evaluate reaction`` reports the critic's AUC), the input and the architecture are not
-what stops the agents from learning to give way (docs/training.md#giving-way).
+what stops the agents from learning to give way (docs/training.md#giving-way-why-our-agents-have-not-learned-it-yet).
 
     python tools/crash_risk_capacity.py --checkpoint models/easy.pt --init fresh models/easy.pt
 """

@@ -89,7 +89,7 @@ def _add_actor_options(parser: argparse.ArgumentParser) -> None:
                              "'delayed' part of D-A3C), >= 0. 0 drives the whole episode on the weights it "
                              "started from. Lower it to fine-tune a trained policy at a small --sigma-start: "
                              "the local gradient scales as 1/sigma^2, and at sigma 0.05 the default step "
-                             "alone cut a hard student's training reach from 93%% to 52%% (docs/training.md)")
+                             "alone cut a hard student's training reach from 93%% to 52%% (docs/imitation.md)")
     parser.add_argument("--acceleration-cost", type=float, default=0.0, metavar="COEF",
                         help="weight of a cost on the squared acceleration mean per step (not in the paper; 0: "
                              "off); keeps the mean near 'hold' at the speed cap instead of full throttle, so "

@@ -59,7 +59,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--teacher-approach-speed", type=float, default=None, metavar="M_PER_S",
                         help="the teacher slows to this speed [m/s] before every conflict zone shared with a route "
                              "that would have priority, whether or not a car is there: a driver that expects cars "
-                             "it cannot see yet (docs/training.md measures 1 m/s with --teacher-sight view). "
+                             "it cannot see yet (docs/imitation.md measures 1 m/s with --teacher-sight view). "
                              "Default: no such slowing")
     parser.add_argument("--teacher-approach-signs", choices=("all", "own"), default="all",
                         help="with --teacher-approach-speed: which signs decide the routes that would have priority: "
@@ -69,7 +69,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--teacher-brake-for-blockers", action="store_true",
                         help="the teacher also stops before a conflict zone that a car in sight stands or drives "
                              "in, even with the right of way (after 8 s standing it goes anyway): on easy it "
-                             "halves the crashes of --teacher-sight view (docs/training.md)")
+                             "halves the crashes of --teacher-sight view (docs/imitation.md)")
     parser.add_argument("--teacher-wait-outside-zones", action="store_true",
                         help="the teacher never stops with its body inside another route's conflict zone; it "
                              "stops before the first of overlapping zones instead (hard's zones overlap)")
@@ -79,7 +79,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--teacher-patience", type=float, default=4.0, metavar="SECONDS",
                         help="after standing this long the teacher stops yielding to cars with priority and goes; "
                              "'inf': it never does. A clock the student's four frames (0.3 s) cannot show: on "
-                             "medium and hard 'inf' also drives better (docs/training.md)")
+                             "medium and hard 'inf' also drives better (docs/imitation.md)")
     parser.add_argument("--teacher-blocker-patience", type=float, default=8.0, metavar="SECONDS",
                         help="with --teacher-brake-for-blockers: after standing this long the teacher stops "
                              "braking for cars in its way; 'inf': it never does")
@@ -93,7 +93,7 @@ def add_parser(subparsers) -> None:
                         help="with --teacher-brake-for-blockers: multiply by W the weight of each sample whose "
                              "label is the teacher braking for a car standing in its way (on top of --brake-weight): "
                              "in the hard student's crossing crashes the car with priority ran into a car already "
-                             "in their zone (docs/training.md). Default 1")
+                             "in their zone (docs/imitation.md). Default 1")
     parser.add_argument("--patience-weight", type=float, default=1.0, metavar="W",
                         help="multiply by W the weight of each sample whose label is the teacher going, having "
                              "stood out --teacher-patience, although a car with priority is near: about 0.2%% of "
@@ -102,7 +102,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--priority-exponent", type=float, default=0.0, metavar="ALPHA",
                         help="draw training samples with probability proportional to (the student's acceleration "
                              "error + 0.15 m/s2) ** ALPHA, measured when it drove past them and each time they are "
-                             "trained on (prioritized replay as hard-example mining; docs/training.md). Default 0: "
+                             "trained on (prioritized replay as hard-example mining; docs/imitation.md). Default 0: "
                              "uniformly")
     parser.add_argument("--average-half-life", type=float, default=None, metavar="UPDATES",
                         help="write as OUT/pretrained.pt a moving average of the weights over the Adam steps, "
@@ -113,7 +113,7 @@ def add_parser(subparsers) -> None:
                         help="the network's sizes per head: first and second convolution channels, hidden units "
                              "(the default network is 16,16,128). With --init-from the loaded network is widened "
                              "to these sizes computing the same function: its units keep their weights, new ones "
-                             "start with zero outputs (docs/training.md). Default: the --init-from file's sizes")
+                             "start with zero outputs (docs/imitation.md). Default: the --init-from file's sizes")
     parser.add_argument("--standing-input", action="store_true",
                         help="give the network a third scalar beside speed and target speed: how long its car "
                              "has stood (under 0.5 m/s) [s], the clock the teacher's --teacher-patience reads and "

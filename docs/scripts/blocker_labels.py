@@ -5,7 +5,7 @@
 
 The student (the policy's Gaussian means) drives every car; at every step the hard students' teacher
 (view-limited, approaching at 2 m/s by its own sign, braking for blockers, waiting outside zones,
-breaking wait cycles: ``crossway pretrain --teacher-*`` as in docs/training.md) says what it would
+breaking wait cycles: ``crossway pretrain --teacher-*`` as in docs/imitation.md) says what it would
 do in the same state, and whether that is its braking for a car standing in its way
 (``ScriptedDriver.blocker_bound``, the labels ``crossway pretrain --blocker-weight`` counts more).
 Prints one JSON object:

@@ -1,4 +1,4 @@
-"""Can the network learn the teacher's hard braking from its views at all? (docs/training.md)
+"""Can the network learn the teacher's hard braking from its views at all? (docs/imitation.md)
 
     python docs/scripts/brake_learnability.py [--init-from models/hard.pt] [--scenario hard]
         [--teacher-sight view] [--train-samples 60000] [--held-out-samples 15000] [--epochs 8]

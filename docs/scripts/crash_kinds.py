@@ -1,4 +1,4 @@
-"""What the view-limited scripted driver's crashes look like (docs/training.md, session 14).
+"""What the view-limited scripted driver's crashes look like (docs/imitation.md, session 14).
 
     python docs/scripts/crash_kinds.py [--scenario easy] [--delay-max 10] [--episodes 600] [--seed 11]
         [--approach-speed 1] [--approach-signs own] [--brake-for-blockers] [--wait-outside-zones]

@@ -1,4 +1,4 @@
-"""How rare the hard teacher's "wait, then go" labels are (docs/training.md, session 29).
+"""How rare the hard teacher's "wait, then go" labels are (docs/imitation.md, session 29).
 
     python docs/scripts/patience_labels.py [--delay-max 30] [--episodes 1500] [--seed 7]
 

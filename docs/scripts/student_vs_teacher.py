@@ -1,4 +1,4 @@
-"""How well a pretrained student copies its teacher where it matters (docs/training.md).
+"""How well a pretrained student copies its teacher where it matters (docs/imitation.md).
 
     python docs/scripts/student_vs_teacher.py CHECKPOINT [--scenario hard] [--teacher-sight full|view]
         [--steps 6000] [--delay-max 30] [--seed 11]

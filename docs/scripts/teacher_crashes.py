@@ -1,4 +1,4 @@
-"""Where the view-limited scripted driver's at-fault crashes come from (docs/training.md).
+"""Where the view-limited scripted driver's at-fault crashes come from (docs/imitation.md).
 
     python docs/scripts/teacher_crashes.py [--episodes 1500] [--delay-max 30] [--seed 5]
 

@@ -1,4 +1,4 @@
-"""How far the scripted driver must see to drive the hard junction well (docs/training.md).
+"""How far the scripted driver must see to drive the hard junction well (docs/imitation.md).
 
     python docs/scripts/teacher_sight.py [--episodes 500] [--scenario hard]
 

@@ -1,4 +1,4 @@
-"""Who waits for whom on the road when a car has driven 35 s (docs/training.md, session 15).
+"""Who waits for whom on the road when a car has driven 35 s (docs/imitation.md, session 15).
 
     python docs/scripts/waiting_cars.py [--scenario hard] [--episodes 60] [--seed 5] [--delay-max 30]
         [--wait-outside-zones] [--break-wait-cycles] [--snapshots 3] [--checkpoint CKPT]

@@ -1,4 +1,4 @@
-"""Average the weights of several students into one policy, a "model soup" (docs/training.md, session 20).
+"""Average the weights of several students into one policy, a "model soup" (docs/imitation.md, session 20).
 
     python docs/scripts/weight_soup.py OUT.pt CKPT CKPT [CKPT ...]
 
