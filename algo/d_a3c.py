@@ -42,7 +42,8 @@ class DA3CConfig:
     # weight of a cost on the squared acceleration mean, acceleration_cost * mu_acc^2 per step
     # (normalised units; not in the paper, 0 leaves it out). With the speed capped at the target
     # speed every mean above "hold" is free, so without it mu_acc drifts to tanh's +1, where the
-    # exploration noise almost never brakes and tanh's slope is ~0 (docs/training.md#giving-way-why-our-agents-have-not-learned-it-yet)
+    # exploration noise almost never brakes and tanh's slope is ~0
+    # (docs/training.md#giving-way-why-our-agents-have-not-learned-it-yet)
     acceleration_cost: float = 0.0
     # lambda of generalized advantage estimation (Schulman et al. 2016) for the policy gradient; 1
     # gives the paper's A_t = R_t - v(s_t) exactly, lower values weight the critic's later estimates
