@@ -299,8 +299,13 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
               for kind, rows in starts.items() for sign, row in rows.items()]
     starts_csv_path.write_text("\n".join(lines) + "\n")
     md_path = stem.with_suffix(".md")
-    page = (f"# Table I, {scenario}\n\n{meta['command']}\n\n{platform_line(meta['platform'])}\n\n"
-            + markdown(scenario, table))
+    page = f"# Table I, {scenario}\n\n{meta['command']}\n\n{platform_line(meta['platform'])}\n\n"
+    protocol = meta.get("protocol_delays_max_s", meta["delays_max_s"])
+    if meta["delays_max_s"] != protocol:  # --sweep-up-to: the densest tests alone
+        page += (f"Only the tests with delay_max {meta['delays_max_s'][0]:g} to {meta['delays_max_s'][-1]:g} s of "
+                 f"the protocol's {protocol[0]:g} to {protocol[-1]:g} s: the paper's columns are for the whole "
+                 "protocol, so ours compare with them only loosely.\n\n")
+    page += markdown(scenario, table)
     cut = sum(sum(t.get("cut_by_redraw", {}).values()) for t in tests)
     if cut:  # signs redrawn during the tests (hard)
         counted = sum(sum(c.values()) for t in tests for c in t["counts"].values())
@@ -324,10 +329,12 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
                out_dir: Path, command: str, scripted: DriverOptions | None = None,
-               sign_restart: str | None = None) -> dict:
+               sign_restart: str | None = None, sweep_up_to_s: float | None = None) -> dict:
     """The whole protocol in parallel workers (``scripted``: the scripted driver's options when
-    ``checkpoint`` is None; ``sign_restart``: overrides the scenario's ``episodes.sign_change_restart``);
-    writes JSON, CSV and Markdown into ``out_dir``."""
+    ``checkpoint`` is None; ``sign_restart``: overrides the scenario's ``episodes.sign_change_restart``;
+    ``sweep_up_to_s``: only the tests with delay_max up to it, each with the seeds it has in the
+    whole protocol, so that their first chunks are the whole protocol's episodes); writes JSON, CSV
+    and Markdown into ``out_dir``."""
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
@@ -338,8 +345,13 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
 
         check_checkpoint(checkpoint, spec)  # refuse a bad checkpoint before starting workers
     scripted = scripted or DriverOptions()
+    schedule = delay_schedule(spec.episodes.delay_max_s)
+    if sweep_up_to_s is not None and not schedule[0] <= sweep_up_to_s:
+        raise ValueError(f"--sweep-up-to must be at least the first test's delay_max, {schedule[0]:g} s; "
+                         f"got {sweep_up_to_s:g}")
+    # a test's seed is its place in the whole protocol: a shorter sweep runs the same tests
     tests = [TestSpec(spec, d, episodes, seed + i, checkpoint, scripted)
-             for i, d in enumerate(delay_schedule(spec.episodes.delay_max_s))]
+             for i, d in enumerate(schedule) if sweep_up_to_s is None or d <= sweep_up_to_s]
     # each test runs as chunks of at most CHUNK_EPISODES episodes (own simulator, own seed), so
     # every worker stays busy to the end; the chunks do not depend on --workers
     chunks = [replace(t, episodes=min(CHUNK_EPISODES, t.episodes - start),
@@ -354,6 +366,8 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
     table = summarise(results)
     meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
             "delays_max_s": [t.delay_max_s for t in tests], "seed": seed, "workers": workers,
+            # the whole protocol's tests; delays_max_s is fewer where --sweep-up-to cut the sweep
+            "protocol_delays_max_s": schedule,
             # signs redrawn at this interval [s] (0: never) and how the cars restart after a redraw
             "sign_change_interval_s": spec.episodes.sign_change_interval_s,
             "sign_change_restart": spec.episodes.sign_change_restart,

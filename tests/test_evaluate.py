@@ -61,6 +61,28 @@ def test_table1_scripted_end_to_end(tmp_path):
     assert f"torch {torch.__version__}" in page  # the page says what it ran on
 
 
+def test_table1_sweep_up_to_runs_the_densest_tests_with_their_own_seeds(tmp_path):
+    """--sweep-up-to S runs only the tests with delay_max <= S, each with the seeds it has in the
+    whole protocol: the same episodes as those tests of a whole run, and the page says it is a part."""
+    whole = crossway("evaluate", "table1", "--scripted", "--scenario", "easy", "--episodes", "6",
+                     "--workers", "2", "--out", str(tmp_path / "whole"))
+    part = crossway("evaluate", "table1", "--scripted", "--scenario", "easy", "--episodes", "6",
+                    "--workers", "1", "--sweep-up-to", "20", "--out", str(tmp_path / "part"))
+    assert whole.returncode == 0 and part.returncode == 0, whole.stderr + part.stderr
+    whole_report = json.loads((tmp_path / "whole" / "table1-easy.json").read_text())
+    part_report = json.loads((tmp_path / "part" / "table1-easy.json").read_text())
+    assert part_report["meta"]["delays_max_s"] == [10.0, 20.0]
+    assert part_report["meta"]["protocol_delays_max_s"] == [10.0, 20.0, 30.0]
+    assert [t["counts"] for t in part_report["tests"]] == [t["counts"] for t in whole_report["tests"][:2]]
+    assert "Only the tests with delay_max 10 to 20 s of the protocol's 10 to 30 s" in \
+        (tmp_path / "part" / "table1-easy.md").read_text()
+    assert "Only the tests" not in (tmp_path / "whole" / "table1-easy.md").read_text()
+    refused = crossway("evaluate", "table1", "--scripted", "--scenario", "easy", "--episodes", "6",
+                       "--sweep-up-to", "5", "--out", str(tmp_path / "none"))
+    assert refused.returncode != 0 and "--sweep-up-to must be at least" in refused.stderr
+    assert not (tmp_path / "none" / "table1-easy.json").exists()
+
+
 def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
     """Hard redraws its signs every 120 s and restarts every lane: Table I says how the episodes
     that began right after a redraw did, apart from the others (none of them on easy). With

@@ -35,6 +35,11 @@ def add_parser(subparsers) -> None:
                              "each car waits its random delay before its next episode ('delayed', the "
                              "scenario file's default) or every car starts at the next step ('together', "
                              "eight at once: crossway's reading until session 30; docs/evaluation.md)")
+    table1.add_argument("--sweep-up-to", type=float, default=None, metavar="SECONDS",
+                        help="run only the tests with delay_max up to SECONDS (the densest traffic, where "
+                             "policies lose most): a screen, each test with the seeds it has in the whole "
+                             "protocol, so with half the --episodes it is the first half of those tests' "
+                             "episodes. Default: the whole sweep")
     table1.set_defaults(func=run_table1_command)
 
     rules = experiments.add_parser(
@@ -200,7 +205,8 @@ def run_table1_command(args) -> int:
 
     checkpoint = _checked(args)
     report = run_table1(args.scenario, checkpoint, args.episodes, args.workers, args.seed, args.out,
-                        _command_line(), **_scripted_options(args, checkpoint), sign_restart=args.sign_restart)
+                        _command_line(), **_scripted_options(args, checkpoint), sign_restart=args.sign_restart,
+                        sweep_up_to_s=args.sweep_up_to)
     print(markdown(report["meta"]["scenario"], report["table"]), end="")
     print("wrote " + ", ".join(str(p) for p in report["paths"]) + f" in {report['meta']['wall_s']} s")
     return 0
