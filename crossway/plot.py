@@ -15,19 +15,24 @@ import cairo
 COLOURS = [(0.12, 0.47, 0.71), (0.84, 0.15, 0.16), (0.17, 0.63, 0.17), (1.0, 0.5, 0.05), (0.58, 0.40, 0.74)]
 
 
-def read_progress(path: Path, x: str, y: str) -> tuple[list[float], list[float]]:
-    """Two columns of a progress.csv; a clear error names a missing column."""
+def read_progress(path: Path, x: str, y: str, where: dict[str, str] | None = None) -> tuple[list[float], list[float]]:
+    """Two columns of a CSV (a progress.csv, or a Table I ``table1-S-tests.csv``), keeping only the
+    rows whose ``where`` columns hold the given values (``{"sign": "stop"}``); a clear error names a
+    missing column, or says that no row matched."""
+    where = where or {}
     with open(path, newline="") as handle:
         reader = csv.DictReader(handle)
-        for column in (x, y):
+        for column in (x, y, *where):
             if column not in (reader.fieldnames or []):
                 raise ValueError(f"{path}: no column {column!r} (columns: {reader.fieldnames})")
         xs, ys = [], []
         for row in reader:
-            xs.append(float(row[x]))
-            ys.append(float(row[y]))
+            if all(row[column] == value for column, value in where.items()):
+                xs.append(float(row[x]))
+                ys.append(float(row[y]))
     if not xs:
-        raise ValueError(f"{path}: no rows")
+        matching = " matching " + ", ".join(f"{c}={v}" for c, v in where.items()) if where else ""
+        raise ValueError(f"{path}: no rows{matching}")
     return xs, ys
 
 
@@ -53,9 +58,11 @@ def _label(value: float) -> str:
 
 def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, title: str, x_label: str,
                 y_label: str, y_range: tuple[float, float] | None = None, width: int = 800,
-                height: int = 480, styles: list[tuple[int, bool]] | None = None) -> Path:
+                height: int = 480, styles: list[tuple[int, bool]] | None = None, markers: bool = False) -> Path:
     """Curves of (name, xs, ys) on shared axes, written as a PNG; ``styles`` gives each series a
-    (colour index, dashed) pair (default: colours in order, solid lines)."""
+    (colour index, dashed) pair (default: colours in order, solid lines); ``markers`` also draws a
+    dot at every point of the solid series (a few measured points, such as Table I's tests, rather
+    than a curve)."""
     if styles is None:
         styles = [(i, False) for i in range(len(series))]
     if len(styles) != len(series):
@@ -125,6 +132,10 @@ def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, t
         for x, y in zip(xs[1:], ys[1:]):
             ctx.line_to(px(x), py(y))
         ctx.stroke()
+        if markers and not dashed:  # a dashed series is a reference line, not measured points
+            for x, y in zip(xs, ys):
+                ctx.arc(px(x), py(y), 4, 0, 2 * math.pi)
+                ctx.fill()
     ctx.set_dash([])
     ctx.restore()
     ctx.set_font_size(12)

@@ -11,6 +11,7 @@ average speed, each averaged over the tests.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections import Counter, defaultdict
 from dataclasses import dataclass, replace
@@ -298,6 +299,7 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
     lines += [",".join([kind, sign, str(row["episodes"]), *(str(round(row[o], 5)) for o in OUTCOMES)])
               for kind, rows in starts.items() for sign, row in rows.items()]
     starts_csv_path.write_text("\n".join(lines) + "\n")
+    png_path = plot_tests(out_dir / f"table1-{scenario}-tests.png", scenario, test_rows)
     md_path = stem.with_suffix(".md")
     page = f"# Table I, {scenario}\n\n{meta['command']}\n\n{platform_line(meta['platform'])}\n\n"
     protocol = meta.get("protocol_delays_max_s", meta["delays_max_s"])
@@ -317,14 +319,38 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
             page += (f"Among the counted episodes that began at least the time limit before the next redraw, "
                      f"which no redraw could cut ({uncut['all']['episodes']}, all tests pooled), reaches per "
                      f"sign are {cells}.\n")
-    page += "\n## Per test\n\n" + markdown_tests(test_rows)
+    page += f"\n## Per test\n\n![reach per test and sign]({png_path.name})\n\n" + markdown_tests(test_rows)
     if "burst" in starts:  # signs redrawn during the tests (hard)
         when = ("when every lane starts at once" if meta.get("sign_change_restart") == "together"
                 else "each lane after its own random delay, a short one here")
         page += (f"\n## By how the episodes began\n\nburst: within two steps of a sign redraw ({when}); "
                  "staggered: every other episode. All tests pooled.\n\n" + markdown_starts(starts))
     md_path.write_text(page)
-    return [json_path, csv_path, tests_csv_path, starts_csv_path, md_path]
+    return [json_path, csv_path, tests_csv_path, starts_csv_path, png_path, md_path]
+
+
+def plot_tests(path: Path, scenario: str, test_rows: list[dict]) -> Path:
+    """The per-test reaches as a picture: one line per sign against the test's delay_max, a dot per
+    test, and the paper's reach for that sign (its average over the tests) dashed in the same
+    colour, so that the tests under the paper's figure stand out."""
+    from crossway.plot import plot_curves
+
+    series, styles = [], []
+    paper = PAPER_TABLE1.get(scenario, {})
+    for colour, sign in enumerate(SIGNS):
+        rows = [r for r in test_rows if r["sign"] == sign and r["episodes"]]
+        if not rows:
+            continue
+        xs = [r["delay_max_s"] for r in rows]
+        series.append((f"{sign}: ours", xs, [r["goal"] for r in rows]))
+        styles.append((colour, False))
+        if sign in paper:
+            series.append((f"{sign}: the paper (its average over the tests)", [xs[0], xs[-1]], [paper[sign][0]] * 2))
+            styles.append((colour, True))
+    low = min(min(ys) for _, _, ys in series)
+    y_range = (max(0.0, math.floor(low * 20 - 0.5) / 20), 1.0)  # a 0.05 step under the lowest point
+    return plot_curves(series, path, f"Table I, {scenario}: reach per test", "delay_max [s]", "reach",
+                       y_range=y_range, styles=styles, markers=True)
 
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,

@@ -59,6 +59,11 @@ def test_table1_scripted_end_to_end(tmp_path):
     page = (tmp_path / "table1-easy.md").read_text()
     assert "(paper)" in page and "| Reaches, standard error |" in page and "## Per test" in page
     assert f"torch {torch.__version__}" in page  # the page says what it ran on
+    import cairo  # the per-test picture: a real PNG, linked from the page
+
+    picture = cairo.ImageSurface.create_from_png(str(tmp_path / "table1-easy-tests.png"))
+    assert (picture.get_width(), picture.get_height()) == (800, 480)
+    assert "](table1-easy-tests.png)" in page
 
 
 def test_table1_sweep_up_to_runs_the_densest_tests_with_their_own_seeds(tmp_path):

@@ -92,3 +92,25 @@ def test_ticks_reach_both_ends_of_the_axis():
     assert _nice_ticks(0.85, 1.0) == pytest.approx([0.85, 0.9, 0.95, 1.0])
     assert _nice_ticks(0.0, 1.0) == pytest.approx([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
     assert _nice_ticks(0.0, 1e6) == pytest.approx([0.0, 2e5, 4e5, 6e5, 8e5, 1e6])
+
+
+def test_where_keeps_the_rows_of_one_sign_and_markers_show_single_points(tmp_path):
+    """--where sign=stop plots one sign of a Table I tests CSV; a test alone is a dot, not nothing."""
+    path = tmp_path / "table1-hard-tests.csv"
+    path.write_text("delay_max_s,sign,episodes,goal\n10.0,stop,5,0.5\n10.0,none,5,1.0\n20.0,stop,5,0.75\n")
+    assert read_progress(path, "delay_max_s", "goal", {"sign": "stop"}) == ([10.0, 20.0], [0.5, 0.75])
+    with pytest.raises(ValueError, match="no rows matching sign=yield"):
+        read_progress(path, "delay_max_s", "goal", {"sign": "yield"})
+    with pytest.raises(ValueError, match="no column 'lane'"):
+        read_progress(path, "delay_max_s", "goal", {"lane": "1"})
+    command = [sys.executable, "-m", "crossway", "plot", f"stop={path}", "--x", "delay_max_s", "--y", "goal",
+               "--where", "sign=stop", "--y-range", "0,1"]
+    result = subprocess.run(command + ["--out", str(tmp_path / "w.png")], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    bad = subprocess.run(command[:-4] + ["--where", "sign", "--out", str(tmp_path / "x.png")], capture_output=True,
+                         text=True, timeout=60)
+    assert bad.returncode != 0 and "expected COLUMN=VALUE" in bad.stderr
+    single = plot_curves([("one", [10.0], [0.5])], tmp_path / "one.png", "t", "x", "y", y_range=(0, 1), markers=True)
+    assert len(colour_rows(pixels(single), COLOURS[0])) >= 6  # the dot (and the legend swatch)
+    bare = plot_curves([("one", [10.0], [0.5])], tmp_path / "bare.png", "t", "x", "y", y_range=(0, 1))
+    assert len(colour_rows(pixels(bare), COLOURS[0])) < len(colour_rows(pixels(single), COLOURS[0]))

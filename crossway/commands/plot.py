@@ -16,7 +16,9 @@ def add_parser(subparsers) -> None:
                     "--x samples --y student_reach_rate for a pretrain run.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("progress", nargs="+", type=Path, help="progress.csv files; NAME=PATH sets a legend name")
+    parser.add_argument("progress", nargs="+", type=Path,
+                        help="progress.csv files (or other CSVs, such as Table I's table1-S-tests.csv); "
+                             "NAME=PATH sets a legend name")
     parser.add_argument("--out", type=Path, required=True, help="PNG file to write")
     parser.add_argument("--x", default="agent_steps", help="column on the x axis")
     parser.add_argument("--y", default="reach_rate", help="column on the y axis")
@@ -24,7 +26,18 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--y-range", type=y_range_arg, metavar="LOW,HIGH", default=argparse.SUPPRESS,
                         help="y axis limits, e.g. 0.9,1 to tell rates near 1 apart (default: 0,1 for a column "
                              "whose name ends in 'rate', the data's range otherwise)")
+    parser.add_argument("--where", action="append", type=where_arg, metavar="COLUMN=VALUE", default=[],
+                        help="keep only the rows whose COLUMN holds VALUE (repeatable), e.g. for Table I's "
+                             "table1-S-tests.csv: --x delay_max_s --y goal --where sign=stop")
+    parser.add_argument("--markers", action="store_true", help="also draw a dot at every point")
     parser.set_defaults(func=run)
+
+
+def where_arg(text: str) -> tuple[str, str]:
+    column, equals, value = text.partition("=")
+    if not equals or not column:
+        raise argparse.ArgumentTypeError(f"expected COLUMN=VALUE, got {text!r}")
+    return column, value
 
 
 def y_range_arg(text: str) -> tuple[float, float]:
@@ -52,9 +65,10 @@ def run(args) -> int:
         name, path = text.split("=", 1) if "=" in text else (Path(text).parent.name, text)
         if not Path(path).is_file():
             raise ValueError(f"no such file: {path}")
-        xs, ys = read_progress(Path(path), args.x, args.y)
+        xs, ys = read_progress(Path(path), args.x, args.y, dict(getattr(args, "where", [])))
         series.append((name, xs, ys))
     y_range = getattr(args, "y_range", None) or ((0.0, 1.0) if args.y.endswith("rate") else None)
-    plot_curves(series, args.out, args.title, args.x.replace("_", " "), args.y.replace("_", " "), y_range)
+    plot_curves(series, args.out, args.title, args.x.replace("_", " "), args.y.replace("_", " "), y_range,
+                markers=getattr(args, "markers", False))
     print(f"wrote {args.out}")
     return 0
