@@ -104,7 +104,7 @@ def test_where_keeps_the_rows_of_one_sign_and_markers_show_single_points(tmp_pat
     with pytest.raises(ValueError, match="no column 'lane'"):
         read_progress(path, "delay_max_s", "goal", {"lane": "1"})
     command = [sys.executable, "-m", "crossway", "plot", f"stop={path}", "--x", "delay_max_s", "--y", "goal",
-               "--where", "sign=stop", "--y-range", "0,1"]
+               "--x-label", "delay_max [s]", "--y-label", "reach", "--where", "sign=stop", "--y-range", "0,1"]
     result = subprocess.run(command + ["--out", str(tmp_path / "w.png")], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     bad = subprocess.run(command[:-4] + ["--where", "sign", "--out", str(tmp_path / "x.png")], capture_output=True,

@@ -30,6 +30,8 @@ def add_parser(subparsers) -> None:
                         help="keep only the rows whose COLUMN holds VALUE (repeatable), e.g. for Table I's "
                              "table1-S-tests.csv: --x delay_max_s --y goal --where sign=stop")
     parser.add_argument("--markers", action="store_true", help="also draw a dot at every point")
+    parser.add_argument("--x-label", default=None, help="x axis label (default: the --x column's name)")
+    parser.add_argument("--y-label", default=None, help="y axis label (default: the --y column's name)")
     parser.set_defaults(func=run)
 
 
@@ -68,7 +70,9 @@ def run(args) -> int:
         xs, ys = read_progress(Path(path), args.x, args.y, dict(getattr(args, "where", [])))
         series.append((name, xs, ys))
     y_range = getattr(args, "y_range", None) or ((0.0, 1.0) if args.y.endswith("rate") else None)
-    plot_curves(series, args.out, args.title, args.x.replace("_", " "), args.y.replace("_", " "), y_range,
+    x_label = getattr(args, "x_label", None) or args.x.replace("_", " ")
+    y_label = getattr(args, "y_label", None) or args.y.replace("_", " ")
+    plot_curves(series, args.out, args.title, x_label, y_label, y_range,
                 markers=getattr(args, "markers", False))
     print(f"wrote {args.out}")
     return 0
