@@ -348,7 +348,7 @@ def plot_tests(path: Path, scenario: str, test_rows: list[dict]) -> Path:
             series.append((f"{sign}: the paper (its average over the tests)", [xs[0], xs[-1]], [paper[sign][0]] * 2))
             styles.append((colour, True))
     low = min(min(ys) for _, _, ys in series)
-    y_range = (max(0.0, math.floor(low * 20 - 0.5) / 20), 1.0)  # a 0.05 step under the lowest point
+    y_range = (max(0.0, math.floor(low * 20 - 0.5) / 20), 1.0)  # on a 0.05 step, 0.025 or more under the lowest point
     return plot_curves(series, path, f"Table I, {scenario}: reach per test", "delay_max [s]", "reach",
                        y_range=y_range, styles=styles, markers=True)
 
