@@ -58,11 +58,12 @@ def _label(value: float) -> str:
 
 def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, title: str, x_label: str,
                 y_label: str, y_range: tuple[float, float] | None = None, width: int = 800,
-                height: int = 480, styles: list[tuple[int, bool]] | None = None, markers: bool = False) -> Path:
+                height: int = 480, styles: list[tuple[int, bool]] | None = None, markers: bool = False,
+                x_range: tuple[float, float] | None = None) -> Path:
     """Curves of (name, xs, ys) on shared axes, written as a PNG; ``styles`` gives each series a
     (colour index, dashed) pair (default: colours in order, solid lines); ``markers`` also draws a
     dot at every point of the solid series (a few measured points, such as Table I's tests, rather
-    than a curve)."""
+    than a curve); ``x_range`` sets the x axis limits (default: the data's range)."""
     if styles is None:
         styles = [(i, False) for i in range(len(series))]
     if len(styles) != len(series):
@@ -75,7 +76,7 @@ def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, t
     left, right, top, bottom = 80, 20, 50, 60 + 18 * legend_rows  # the legend sits under the axis label
     all_x = [v for _, xs, _ in series for v in xs]
     all_y = [v for _, _, ys in series for v in ys]
-    x0, x1 = min(all_x), max(all_x)
+    x0, x1 = x_range if x_range else (min(all_x), max(all_x))
     y0, y1 = y_range if y_range else (min(all_y), max(all_y))
     x1 = x1 if x1 > x0 else x0 + 1
     y1 = y1 if y1 > y0 else y0 + 1

@@ -337,6 +337,8 @@ def plot_tests(path: Path, scenario: str, test_rows: list[dict]) -> Path:
 
     series, styles = [], []
     paper = PAPER_TABLE1.get(scenario, {})
+    delays = [r["delay_max_s"] for r in test_rows]
+    x_range = (min(delays) - 5.0, max(delays) + 5.0)  # half a step beyond the tests: no dot on the frame
     for colour, sign in enumerate(SIGNS):
         rows = [r for r in test_rows if r["sign"] == sign and r["episodes"]]
         if not rows:
@@ -345,12 +347,12 @@ def plot_tests(path: Path, scenario: str, test_rows: list[dict]) -> Path:
         series.append((f"{sign}: ours", xs, [r["goal"] for r in rows]))
         styles.append((colour, False))
         if sign in paper:
-            series.append((f"{sign}: the paper (its average over the tests)", [xs[0], xs[-1]], [paper[sign][0]] * 2))
+            series.append((f"{sign}: the paper (its average over the tests)", list(x_range), [paper[sign][0]] * 2))
             styles.append((colour, True))
     low = min(min(ys) for _, _, ys in series)
     y_range = (max(0.0, math.floor(low * 20 - 0.5) / 20), 1.0)  # on a 0.05 step, 0.025 or more under the lowest point
     return plot_curves(series, path, f"Table I, {scenario}: reach per test", "delay_max [s]", "reach",
-                       y_range=y_range, styles=styles, markers=True)
+                       y_range=y_range, styles=styles, markers=True, x_range=x_range)
 
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,

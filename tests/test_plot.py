@@ -114,3 +114,18 @@ def test_where_keeps_the_rows_of_one_sign_and_markers_show_single_points(tmp_pat
     assert len(colour_rows(pixels(single), COLOURS[0])) >= 6  # the dot (and the legend swatch)
     bare = plot_curves([("one", [10.0], [0.5])], tmp_path / "bare.png", "t", "x", "y", y_range=(0, 1))
     assert len(colour_rows(pixels(bare), COLOURS[0])) < len(colour_rows(pixels(single), COLOURS[0]))
+
+
+def test_table1_picture_of_a_single_test_keeps_its_dots_inside_and_draws_the_paper(tmp_path):
+    """One test (--sweep-up-to 10): the x axis spans 5 s either side, so the dots sit inside the
+    frame, and the paper's reach per sign is a dashed line across it, not a point."""
+    from evaluation.table1 import plot_tests
+
+    rows = [{"delay_max_s": 10.0, "sign": "stop", "episodes": 100, "goal": 0.9}]
+    image = pixels(plot_tests(tmp_path / "t.png", "hard", rows))
+    left, right, top, bottom = 80, 20, 50, 60 + 18 * 2  # stop: ours and the paper's, two legend rows
+    target = np.round(np.array(COLOURS[2]) * 255).astype(int)  # stop is the third sign's colour
+    hits = np.all(np.abs(image.astype(int) - target) <= 2, axis=2)[top:480 - bottom, left + 2:800 - right - 2]
+    dot_rows = np.flatnonzero(hits[:, 330:370].sum(axis=1) >= 5)
+    assert len(dot_rows) >= 5  # a filled dot in the middle of the frame (x = 10 of 5..15)
+    assert hits.sum(axis=1).max() > 300  # the paper's 0.972, dashed across the frame
