@@ -67,12 +67,12 @@ def run(args) -> int:
         name, path = text.split("=", 1) if "=" in text else (Path(text).parent.name, text)
         if not Path(path).is_file():
             raise ValueError(f"no such file: {path}")
-        xs, ys = read_progress(Path(path), args.x, args.y, dict(getattr(args, "where", [])))
+        xs, ys = read_progress(Path(path), args.x, args.y, dict(args.where))
         series.append((name, xs, ys))
     y_range = getattr(args, "y_range", None) or ((0.0, 1.0) if args.y.endswith("rate") else None)
-    x_label = getattr(args, "x_label", None) or args.x.replace("_", " ")
-    y_label = getattr(args, "y_label", None) or args.y.replace("_", " ")
+    x_label = args.x_label or args.x.replace("_", " ")
+    y_label = args.y_label or args.y.replace("_", " ")
     plot_curves(series, args.out, args.title, x_label, y_label, y_range,
-                markers=getattr(args, "markers", False))
+                markers=args.markers)
     print(f"wrote {args.out}")
     return 0
