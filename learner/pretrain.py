@@ -95,6 +95,10 @@ class PretrainConfig:
     # distil a trained policy instead (an output ensemble, docs/scripts/ensemble.py): its Gaussian means
     # are the labels and the scripted teacher's options above do not apply. None: the scripted teacher
     teacher_checkpoint: Path | None = None
+    # drive the episodes the student would drive with this fixed trained policy instead (such as the
+    # output ensemble the student will join): the labels then come from the states the policy that will
+    # be deployed meets (DAgger on its distribution, not the student's own). None: the student drives
+    driver_checkpoint: Path | None = None
 
 
 # the scripted teacher's settings; a policy teacher (teacher_checkpoint) refuses any of them changed
@@ -108,6 +112,21 @@ def scripted_teacher_changes(config: PretrainConfig) -> list[str]:
     return [name for name in SCRIPTED_TEACHER_FIELDS if getattr(config, name) != getattr(PretrainConfig, name)]
 
 
+def fixed_policy_driver(sim, checkpoint: Path, role: str):
+    """A trained policy driving ``sim`` as ``crossway evaluate`` drives it (Gaussian means, an
+    ensemble's members side by side, its caution applied); ValueError, naming its ``role``, when it
+    learnt from another view square than the scenario's."""
+    from algo.policy import policy_views
+    from evaluation.policy import PolicyDriver
+
+    views = policy_views(checkpoint)
+    if views != (sim.spec.views.extent_m, sim.spec.views.shift_m):
+        raise ValueError(f"{role} {checkpoint} learnt from a {views[0]:g} m view square "
+                         f"{views[1]:g} m ahead; scenario {sim.spec.name!r} shows {sim.spec.views.extent_m:g} m "
+                         f"{sim.spec.views.shift_m:g} m ahead")
+    return PolicyDriver(sim, load_policy(checkpoint))
+
+
 class PolicyTeacher:
     """A trained policy as the teacher (policy distillation): its Gaussian means, as ``crossway
     evaluate`` drives it (``evaluation.policy.PolicyDriver``, an ensemble's members side by side
@@ -116,15 +135,7 @@ class PolicyTeacher:
     (``patience_released``)."""
 
     def __init__(self, sim, checkpoint: Path):
-        from algo.policy import policy_views
-        from evaluation.policy import PolicyDriver
-
-        views = policy_views(checkpoint)
-        if views != (sim.spec.views.extent_m, sim.spec.views.shift_m):
-            raise ValueError(f"teacher {checkpoint} learnt from a {views[0]:g} m view square "
-                             f"{views[1]:g} m ahead; scenario {sim.spec.name!r} shows {sim.spec.views.extent_m:g} m "
-                             f"{sim.spec.views.shift_m:g} m ahead")
-        self.driver = PolicyDriver(sim, load_policy(checkpoint))
+        self.driver = fixed_policy_driver(sim, checkpoint, "teacher")
         self.blocker_bound = np.zeros(sim.num_slots, dtype=bool)
         self.patience_released = np.zeros(sim.num_slots, dtype=bool)
 
@@ -213,6 +224,9 @@ class Pretrainer:
         else:
             self.teacher = PolicyTeacher(self.sim, Path(config.teacher_checkpoint))
             self._teacher_actions = self.teacher.act
+        # who drives the episodes the teacher does not: a fixed policy, or the student (None)
+        self.driver = None if config.driver_checkpoint is None else fixed_policy_driver(
+            self.sim, Path(config.driver_checkpoint), "driver")
         self.buffer = DemonstrationBuffer(config.buffer_samples, config.gamma, config.priority_exponent)
         self.rng = np.random.default_rng(config.seed)
         self.result = self.sim.reset()
@@ -236,6 +250,7 @@ class Pretrainer:
 
         sim = self.sim
         student = PolicyDriver(sim, self.policy)
+        stand_in = student if self.driver is None else self.driver  # drives where the teacher does not
         for _ in range(steps):
             result = self.result
             for slot in np.flatnonzero(result.started):
@@ -245,9 +260,12 @@ class Pretrainer:
             present = np.flatnonzero(sim.learners_present)
             prioritized = self.config.priority_exponent > 0  # then the student's error is measured on every car
             errors = None
-            if prioritized or (~self.by_teacher[present]).any():
-                student_actions = student.act(result)
-                actions[~self.by_teacher] = student_actions[~self.by_teacher]
+            driving = bool((~self.by_teacher[present]).any())
+            if driving:
+                driven = stand_in.act(result)
+                actions[~self.by_teacher] = driven[~self.by_teacher]
+            if prioritized:  # the error is the student's own, whoever drives
+                student_actions = driven if driving and stand_in is student else student.act(result)
             frames = newest_frames(result.views[present])
             targets = np.clip(teacher_actions[present] / ACTION_SCALE, -1.0, 1.0).astype(np.float32)
             if prioritized:
@@ -368,7 +386,8 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print,
         approach += f" (for blockers {config.teacher_blocker_patience_s:g} s)"
     teacher = (f"ScriptedDriver (sight: {config.teacher_sight}{approach})" if config.teacher_checkpoint is None
                else f"the policy {config.teacher_checkpoint} (its Gaussian means)")
-    log(f"pretrain {config.scenario}: teacher {teacher}, "
+    driver = "" if config.driver_checkpoint is None else f", the other episodes driven by {config.driver_checkpoint}"
+    log(f"pretrain {config.scenario}: teacher {teacher}{driver}, "
         f"network {_sizes(trainer.policy.config)}, buffer {config.buffer_samples} samples "
         f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")
     started = time.monotonic()

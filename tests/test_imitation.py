@@ -2,6 +2,7 @@
 
 import csv
 import subprocess
+from dataclasses import replace
 import sys
 
 import numpy as np
@@ -542,4 +543,57 @@ def test_a_policy_teacher_labels_every_car_with_its_gaussian_means(tmp_path):
 def test_pretrain_refuses_a_policy_teacher_with_scripted_options_or_no_file(tmp_path, args, message):
     result = crossway("pretrain", "--out", str(tmp_path / "never"), *args)
     assert result.returncode == 2 and message in result.stderr, result.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_a_driver_checkpoint_drives_the_students_episodes_and_the_teacher_still_labels_them(tmp_path):
+    """--driver-checkpoint: where the teacher does not drive, the fixed policy's means are the actions
+    the simulator gets (not the student's); the labels stay the scripted teacher's, and the prioritized
+    error stays the student's own."""
+    from evaluation.policy import PolicyDriver
+    from learner.pretrain import PretrainConfig, Pretrainer
+
+    driver_file = "models/easy-student-guard.pt"
+    trainer = Pretrainer(PretrainConfig(scenario="easy", driver_checkpoint=driver_file, teacher_half_life=1.0,
+                                        priority_exponent=1.0, torch_threads=1, seed=6))
+    sim = trainer.sim
+    driver = PolicyDriver(sim, load_policy(driver_file))
+    student = PolicyDriver(sim, trainer.policy)  # random weights: it drives unlike the driver
+    sent = []
+    real_step = sim.step
+    sim.step = lambda actions: sent.append(actions.copy()) or real_step(actions)
+    checked, apart = 0, 0.0
+    for step in range(40):
+        trainer.by_teacher[:] = step % 2 == 1  # the driver on even steps, the teacher on odd ones
+        result = trainer.result
+        present = np.flatnonzero(sim.learners_present & ~result.started)  # a new episode draws its driver anew
+        expected, own = driver.act(result), student.act(result)
+        lengths = [len(trainer.episodes[slot].errors) for slot in present]
+        trainer.collect(1)
+        if step % 2 == 0 and len(present):
+            np.testing.assert_allclose(sent[-1][present], expected[present], atol=1e-6)
+            apart = max(apart, np.abs(sent[-1][present, 0] - own[present, 0]).max())
+            for k, slot in enumerate(present.tolist()):
+                episode = trainer.episodes[slot]
+                if len(episode.errors) == lengths[k] + 1:  # the episode goes on: its newest step is this one
+                    label = episode.targets[-1][0]
+                    assert episode.errors[-1] == pytest.approx(abs(own[slot, 0] / ACTION_SCALE[0] - label), abs=1e-5)
+                    checked += 1
+    assert checked > 20 and apart > 1.0  # [m/s2]: the cars got the driver's accelerations, not the student's
+    sim.step = real_step
+    trainer.by_teacher[:] = False
+    trainer.config = replace(trainer.config, teacher_half_life=1e-9)  # from now on the driver drives every episode
+    trainer.collect(400)
+    assert trainer.episodes_finished["student"] >= 3 and trainer.outcomes["student"].count("goal") >= 3
+    wide = tmp_path / "wide-views.pt"
+    state = torch.load(driver_file, weights_only=False)
+    state["views"] = {"extent_m": 70.0, "shift_m": 15.0}
+    torch.save(state, wide)
+    with pytest.raises(ValueError, match="driver .* learnt from a 70 m view square 15 m ahead"):
+        Pretrainer(PretrainConfig(scenario="easy", driver_checkpoint=wide))
+
+
+def test_pretrain_refuses_a_driver_checkpoint_that_is_no_policy(tmp_path):
+    result = crossway("pretrain", "--out", str(tmp_path / "never"), "--driver-checkpoint", "models/nothing-here.pt")
+    assert result.returncode == 2 and "no checkpoint file" in result.stderr, result.stderr
     assert not (tmp_path / "never").exists()

@@ -51,6 +51,12 @@ def add_parser(subparsers) -> None:
                              "its caution applied), label every car. It must have learnt from the scenario's view "
                              "square; the --teacher-* options of the scripted driver do not apply. Default: the "
                              "scripted driver")
+    parser.add_argument("--driver-checkpoint", type=Path, default=None, metavar="CHECKPOINT",
+                        help="drive the episodes the teacher does not drive with this fixed trained policy instead "
+                             "of the student (DAgger on the states that policy meets): with the output ensemble a "
+                             "member will rejoin, the member learns the teacher's actions where the ensemble goes "
+                             "wrong (docs/imitation.md, session 32). The rolling 'student' reach is then the "
+                             "driver's. Default: the student drives")
     parser.add_argument("--teacher-sight", choices=("full", "view"), default="full",
                         help="full: the teacher yields to every car with priority, wherever it is; view: only to "
                              "those that may show (any part of them) in the square its views show (50 x 50 m "
@@ -204,6 +210,10 @@ def run(args) -> int:
         from algo.policy import load_policy
 
         load_policy(args.teacher_checkpoint)  # refuse a bad file before the simulator starts
+    if args.driver_checkpoint is not None:
+        from algo.policy import load_policy
+
+        load_policy(args.driver_checkpoint)  # refuse a bad file before the simulator starts
     if args.init_from is not None:
         from algo.policy import load_policy
 
@@ -230,7 +240,8 @@ def run(args) -> int:
         priority_exponent=args.priority_exponent,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
         torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network,
-        standing_input=args.standing_input, teacher_checkpoint=args.teacher_checkpoint)
+        standing_input=args.standing_input, teacher_checkpoint=args.teacher_checkpoint,
+        driver_checkpoint=args.driver_checkpoint)
     changed = scripted_teacher_changes(config)
     if config.teacher_checkpoint is not None and changed:
         given = ", ".join(SCRIPTED_TEACHER_FLAGS[name] for name in changed)
