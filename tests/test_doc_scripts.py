@@ -178,6 +178,22 @@ def test_burst_waits_accounts_for_every_second_of_every_episode():
             assert reasons["moving"] > 0.5 * total
 
 
+def test_stand_labels_files_every_standing_step_and_finds_no_disagreement_when_the_teacher_drives():
+    report = _run_script("stand_labels.py", "--stop-episodes", "15", "--delay-max", "10", "--seed", "5")
+    assert report["driver"] == "the teacher" and report["stop_episodes"] == 15
+    assert sum(counts["episodes"] for counts in report["by_outcome"].values()) == 15
+    for counts in report["by_outcome"].values():
+        for key in ("standing_steps", "teacher_goes", "policy_goes"):  # each step under one place
+            assert counts.get(f"all/{key}", 0) == counts.get(f"before_line/{key}", 0) + counts.get(f"past_line/{key}", 0)
+        # the teacher asked and the teacher driving are one driver: they always agree
+        assert counts.get("all/teacher_goes_policy_holds", 0) == 0
+        assert counts.get("all/policy_goes", 0) == counts.get("all/teacher_goes", 0)
+        assert counts.get("all/teacher_goes_after_its_patience", 0) <= counts.get("all/teacher_goes", 0)
+    assert report["by_outcome"]["goal"]["all/standing_steps"] > 0  # dense traffic: stop-sign cars stand
+    policy = _run_script("stand_labels.py", "--stop-episodes", "4", "--checkpoint", "models/hard-student-untangle2.pt")
+    assert policy["driver"] == "models/hard-student-untangle2.pt" and policy["stop_episodes"] == 4
+
+
 def test_patience_labels_counts_nested_kinds_of_standing():
     report = _run_script("patience_labels.py", "--delay-max", "10", "--episodes", "60", "--seed", "5")
     counts = report["counts"]
