@@ -496,6 +496,15 @@ def test_pretrain_widens_the_initial_network_and_keeps_its_driving(tmp_path):
     assert drift < 0.2
 
 
+def _with_other_views(checkpoint: str, tmp_path):
+    """A copy of ``checkpoint`` that says it learnt from a 70 m view square 15 m ahead."""
+    wide = tmp_path / "wide-views.pt"
+    state = torch.load(checkpoint, weights_only=False)
+    state["views"] = {"extent_m": 70.0, "shift_m": 15.0}
+    torch.save(state, wide)
+    return wide
+
+
 def test_a_policy_teacher_labels_every_car_with_its_gaussian_means(tmp_path):
     """--teacher-checkpoint (policy distillation): the labels are the teacher's means as
     ``crossway evaluate`` drives it, for the cars the teacher drives and the student drives alike."""
@@ -527,12 +536,8 @@ def test_a_policy_teacher_labels_every_car_with_its_gaussian_means(tmp_path):
     with pytest.raises(ValueError, match="teacher_sight, teacher_brake_for_blockers shape the scripted teacher"):
         Pretrainer(PretrainConfig(scenario="easy", teacher_checkpoint=teacher_file, teacher_sight="view",
                                   teacher_brake_for_blockers=True))
-    wide = tmp_path / "wide-views.pt"
-    state = torch.load(teacher_file, weights_only=False)
-    state["views"] = {"extent_m": 70.0, "shift_m": 15.0}
-    torch.save(state, wide)
     with pytest.raises(ValueError, match="learnt from a 70 m view square 15 m ahead"):
-        Pretrainer(PretrainConfig(scenario="easy", teacher_checkpoint=wide))
+        Pretrainer(PretrainConfig(scenario="easy", teacher_checkpoint=_with_other_views(teacher_file, tmp_path)))
 
 
 @pytest.mark.parametrize("args, message", [
@@ -585,12 +590,8 @@ def test_a_driver_checkpoint_drives_the_students_episodes_and_the_teacher_still_
     trainer.config = replace(trainer.config, teacher_half_life=1e-9)  # from now on the driver drives every episode
     trainer.collect(400)
     assert trainer.episodes_finished["student"] >= 3 and trainer.outcomes["student"].count("goal") >= 3
-    wide = tmp_path / "wide-views.pt"
-    state = torch.load(driver_file, weights_only=False)
-    state["views"] = {"extent_m": 70.0, "shift_m": 15.0}
-    torch.save(state, wide)
     with pytest.raises(ValueError, match="driver .* learnt from a 70 m view square 15 m ahead"):
-        Pretrainer(PretrainConfig(scenario="easy", driver_checkpoint=wide))
+        Pretrainer(PretrainConfig(scenario="easy", driver_checkpoint=_with_other_views(driver_file, tmp_path)))
 
 
 def test_pretrain_refuses_a_driver_checkpoint_that_is_no_policy(tmp_path):
