@@ -2,8 +2,8 @@
 
 import csv
 import subprocess
-from dataclasses import replace
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest

@@ -206,14 +206,11 @@ def run(args) -> int:
     if (args.out / "pretrained.pt").exists():
         raise ValueError(f"{str(args.out / 'pretrained.pt')!r} exists: choose another --out, or move it away first "
                          "(nothing is overwritten)")
-    if args.teacher_checkpoint is not None:
-        from algo.policy import load_policy
+    for checkpoint in (args.teacher_checkpoint, args.driver_checkpoint):
+        if checkpoint is not None:
+            from algo.policy import load_policy
 
-        load_policy(args.teacher_checkpoint)  # refuse a bad file before the simulator starts
-    if args.driver_checkpoint is not None:
-        from algo.policy import load_policy
-
-        load_policy(args.driver_checkpoint)  # refuse a bad file before the simulator starts
+            load_policy(checkpoint)  # refuse a bad file before the simulator starts
     if args.init_from is not None:
         from algo.policy import load_policy
 

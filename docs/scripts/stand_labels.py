@@ -23,11 +23,11 @@ import numpy as np
 
 from burst_waits import standing_reasons
 from script_driver import ScriptDriver, add_checkpoint_argument, needs_views
-from simcore.controller import STANDING_MPS, DriverOptions
+from simcore.controller import STANDING_MPS, DriverOptions, scripted_driver
 from simcore.dynamics import VEHICLE_LENGTH
+from simcore.rightofway import Sign
 from simcore.simulator import SimConfig, Simulator
 
-STOP = 2  # the simulator's sign code of a stop line
 TEACHER = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
                         wait_outside_zones=True, break_wait_cycles=True)
 
@@ -43,7 +43,7 @@ def main() -> None:
     sim = Simulator("hard", SimConfig(delay_min_s=0.0, delay_max_s=args.delay_max, observe=needs_views(args)),
                     seed=args.seed)
     result = sim.reset()
-    teacher = ScriptDriver(sim, TEACHER)  # asked every step (it keeps its own standing clocks)
+    teacher = scripted_driver(sim, TEACHER)  # asked every step (it keeps its own standing clocks)
     policy = ScriptDriver(sim, TEACHER, args.checkpoint) if args.checkpoint is not None else None
     entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])
     line_s = np.array([r.junction_entry_s for r in sim.intersection.routes])
@@ -51,11 +51,11 @@ def main() -> None:
     tally: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
     done = 0
     while done < args.stop_episodes:
-        teacher_actions = teacher.act(result)
-        released = teacher._scripted.patience_released.copy()
+        teacher_actions = teacher.act()
+        released = teacher.patience_released.copy()
         actions = teacher_actions if policy is None else policy.act(result)
         standing = np.flatnonzero(sim.learners_present & (sim.speed[: sim.num_slots] < STANDING_MPS)
-                                  & (sim.sign[: sim.num_slots] == STOP)).tolist()
+                                  & (sim.sign[: sim.num_slots] == Sign.STOP)).tolist()
         for slot, reason in (standing_reasons(sim, standing, entry_lane).items() if standing else ()):
             front_past_line_m = sim.s[slot] + 0.5 * VEHICLE_LENGTH - line_s[sim.route[slot]]
             stands[slot].append(("before_line" if front_past_line_m < 0.5 else "past_line", reason,
