@@ -359,3 +359,26 @@ def test_blocker_labels_sorts_every_car_step_and_reports_every_crash():
     assert labels["teacher brakes for a blocker"]["teacher_mean_mps2"] < labels["other steps"]["teacher_mean_mps2"]
     assert len(report["crashes"]) == report["end_reasons"].get("crash", 0)
     assert report["teacher"]["scripted_brake_for_blockers"] is True
+
+
+def test_mixed_traffic_gives_each_car_to_the_driver_its_sign_names():
+    sys.path.insert(0, str(ROOT / "docs/scripts"))
+    try:
+        from mixed_traffic import policy_mask
+    finally:
+        sys.path.pop(0)
+    from simcore.rightofway import Sign
+
+    sign = np.array([Sign.STOP, Sign.YIELD, Sign.NONE, Sign.STOP])
+    assert policy_mask(sign, "stop").tolist() == [True, False, False, True]
+    assert policy_mask(sign, "others").tolist() == [False, True, True, False]
+    assert policy_mask(sign, "all").all() and not policy_mask(sign, "none").any()
+    report = _run_script("mixed_traffic.py", "--checkpoint", "models/hard-student-untangle2.pt",
+                         "--policy-drives", "stop", "--stop-episodes", "6", "--delay-max", "10", "--seed", "5")
+    stop = report["by_sign"]["stop"]
+    assert stop["episodes"] == stop["goal"] + stop["crash"] + stop["time_over"] == 6
+    assert set(report["mean_speed_mps"]) == {"policy", "teacher"}  # both drove, each its own cars
+    assert all(0.0 < v < 15.0 for v in report["mean_speed_mps"].values())
+    teacher_only = _run_script("mixed_traffic.py", "--checkpoint", "models/hard-student-untangle2.pt",
+                               "--policy-drives", "none", "--stop-episodes", "3", "--delay-max", "10", "--seed", "5")
+    assert set(teacher_only["mean_speed_mps"]) == {"teacher"}
