@@ -195,13 +195,20 @@ class DemonstrationBuffer:
 
 # a teacher label at or below this (normalised units: -1.5 m/s^2) is a hard braking decision
 BRAKE_LABEL = -0.5
+ACCELERATION_LOSSES = ("squared", "absolute")  # imitation_loss: the mean or the median of the labels
 
 
 def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: float,
                    brake_weight: float = 1.0, return_errors: bool = False, blocker_weight: float = 1.0,
-                   patience_weight: float = 1.0):
+                   patience_weight: float = 1.0, acceleration_loss: str = "squared"):
     """Mean squared error of both means against the teacher's actions (normalised units), plus
     ``value_coef`` times that of both values against the discounted returns where they are known.
+
+    ``acceleration_loss`` "absolute" takes the acceleration mean's absolute error instead of its
+    square: the minimiser is then the labels' (weighted) median, not their mean. Where the views
+    cannot tell apart states in which the teacher goes and states in which it brakes, the squared
+    error's answer is a compromise between the two (a car that neither goes nor stops), the absolute
+    error's is the more common of them.
 
     ``brake_weight`` > 1 counts each sample whose acceleration label is a hard braking decision
     (``BRAKE_LABEL``) that many times in the acceleration error's weighted mean: those samples are
@@ -215,6 +222,8 @@ def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: flo
 
     Returns the loss and its parts as floats; with ``return_errors`` also each sample's
     |mu_acc - label| [B] (normalised units), the priorities of prioritized sampling."""
+    if acceleration_loss not in ACCELERATION_LOSSES:
+        raise ValueError(f"acceleration_loss must be one of {ACCELERATION_LOSSES}, got {acceleration_loss!r}")
     views, scalars = preprocess(batch["views"], batch["scalars"])
     mu_acc, v_acc, mu_sa, v_sa = policy(views, scalars)
     targets = torch.from_numpy(batch["targets"])
@@ -225,7 +234,9 @@ def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: flo
         weights = weights * torch.where(torch.from_numpy(batch["blocker"]), blocker_weight, 1.0)
     if patience_weight != 1.0 and "released" in batch:
         weights = weights * torch.where(torch.from_numpy(batch["released"]), patience_weight, 1.0)
-    action_loss_acc = (weights * (mu_acc - targets[:, 0]) ** 2).sum() / weights.sum()
+    error_acc = mu_acc - targets[:, 0]
+    per_sample = error_acc.abs() if acceleration_loss == "absolute" else error_acc ** 2
+    action_loss_acc = (weights * per_sample).sum() / weights.sum()
     action_loss_sa = ((mu_sa - targets[:, 1]) ** 2).mean()
     count = known.sum().clamp(min=1.0)
     value_loss_acc = (known * (v_acc - returns[:, 0]) ** 2).sum() / count
@@ -235,5 +246,5 @@ def imitation_loss(policy: Policy, batch: dict[str, np.ndarray], value_coef: flo
         ("action_loss_acc", action_loss_acc), ("action_loss_sa", action_loss_sa),
         ("value_loss_acc", value_loss_acc), ("value_loss_sa", value_loss_sa))}
     if return_errors:
-        return loss, metrics, (mu_acc - targets[:, 0]).detach().abs().numpy()
+        return loss, metrics, error_acc.detach().abs().numpy()
     return loss, metrics

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from algo.imitation import BRAKE_LABEL, DemonstrationBuffer, Episode, imitation_loss, newest_frames
+from algo.imitation import ACCELERATION_LOSSES, BRAKE_LABEL, DemonstrationBuffer, Episode, imitation_loss, newest_frames
 from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy, save_atomically, views_record, widen
 from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S, SIGHTS
 
@@ -76,6 +76,9 @@ class PretrainConfig:
     # a further factor on the weight of the labels where the teacher goes, having stood out its patience,
     # although a car with priority is near (needs a finite teacher_patience_s)
     patience_weight: float = 1.0
+    # the acceleration mean's error: "squared" (fits the labels' mean) or "absolute" (their median: where
+    # the views cannot tell a going state from a braking one, the commoner decision, not a compromise)
+    acceleration_loss: str = "squared"
     # draw training samples with probability ~ (student's acceleration error + floor) ** this; 0: uniformly
     # (algo.imitation's prioritized sampling)
     priority_exponent: float = 0.0
@@ -182,6 +185,8 @@ class Pretrainer:
         if config.blocker_weight != 1.0 and not config.teacher_brake_for_blockers:
             raise ValueError("blocker_weight weighs the teacher's braking for blockers: it needs "
                              "teacher_brake_for_blockers")
+        if config.acceleration_loss not in ACCELERATION_LOSSES:
+            raise ValueError(f"acceleration_loss must be one of {ACCELERATION_LOSSES}, got {config.acceleration_loss!r}")
         if not 0.0 < config.patience_weight < float("inf"):
             raise ValueError(f"patience_weight must be > 0, got {config.patience_weight}")
         if config.patience_weight != 1.0 and config.teacher_patience_s == float("inf"):
@@ -301,7 +306,8 @@ class Pretrainer:
             loss, metrics, errors = imitation_loss(self.policy, batch, self.config.value_coef,
                                                    self.config.brake_weight, return_errors=True,
                                                    blocker_weight=self.config.blocker_weight,
-                                                   patience_weight=self.config.patience_weight)
+                                                   patience_weight=self.config.patience_weight,
+                                                   acceleration_loss=self.config.acceleration_loss)
             self.buffer.update_priorities(indices, errors)
             metrics["brake_label_share"] = float((batch["targets"][:, 0] <= BRAKE_LABEL).mean())
             metrics["blocker_label_share"] = float(batch["blocker"].mean())
@@ -389,7 +395,8 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print,
     driver = "" if config.driver_checkpoint is None else f", the other episodes driven by {config.driver_checkpoint}"
     log(f"pretrain {config.scenario}: teacher {teacher}{driver}, "
         f"network {_sizes(trainer.policy.config)}, buffer {config.buffer_samples} samples "
-        f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.minutes:g} min")
+        f"({trainer.buffer.nbytes / 2**20:.0f} MiB), {config.acceleration_loss} acceleration error, "
+        f"{config.minutes:g} min")
     started = time.monotonic()
     deadline = started + 60.0 * config.minutes
     progress_path = out_dir / "progress.csv"

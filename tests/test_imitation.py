@@ -145,6 +145,47 @@ def test_brake_weight_counts_hard_braking_labels_that_many_times():
     assert weighted["action_loss_acc"] == pytest.approx(by_hand, rel=1e-5)
 
 
+def test_absolute_acceleration_loss_is_the_weighted_mean_absolute_error_and_unknown_names_are_refused():
+    policy, batch, (mu_acc, _, mu_sa, _) = _a_network_and_its_outputs_on_four_samples()
+    labels = np.array([-0.6, -0.9, 0.2, -0.4], np.float32)  # two hard brakes, two others
+    batch["targets"] = np.stack([labels, mu_sa.numpy()], 1).astype(np.float32)
+    absolute = np.abs(labels - mu_acc.numpy()).astype(np.float64)
+    _, plain = imitation_loss(policy, batch, value_coef=0.0, acceleration_loss="absolute")
+    _, weighted = imitation_loss(policy, batch, value_coef=0.0, brake_weight=5.0, acceleration_loss="absolute")
+    assert plain["action_loss_acc"] == pytest.approx(absolute.mean(), rel=1e-5)
+    assert weighted["action_loss_acc"] == pytest.approx((5.0 * absolute[:2].sum() + absolute[2:].sum()) / 12.0,
+                                                        rel=1e-5)
+    assert plain["action_loss_sa"] == pytest.approx(0.0, abs=1e-10)  # steering keeps its squared error
+    with pytest.raises(ValueError, match="acceleration_loss must be one of"):
+        imitation_loss(policy, batch, value_coef=0.0, acceleration_loss="huber")
+
+
+def test_the_absolute_acceleration_loss_learns_the_commoner_decision_where_the_squared_one_compromises():
+    """One view, labelled 'go' (+0.6) in 7 of 10 samples and 'brake' (-0.9) in 3, as where the views
+    cannot tell the teacher's states apart: the squared error drives the network towards the labels'
+    mean (+0.15, a car that neither goes nor brakes), the absolute error towards their median (+0.6)."""
+    from algo.policy import preprocess
+
+    buffer = DemonstrationBuffer(capacity=20, gamma=0.9)
+    buffer.add(episode(1, first_value=0), terminal=False)
+    batch = buffer.batch(np.zeros(10, np.int64))
+    batch["targets"] = np.array([[0.6, 0.0]] * 7 + [[-0.9, 0.0]] * 3, np.float32)
+    learnt = {}
+    for name in ("squared", "absolute"):
+        torch.manual_seed(0)
+        policy = Policy()
+        optimizer = torch.optim.Adam(policy.parameters(), lr=3e-3)
+        for _ in range(300):
+            loss, _ = imitation_loss(policy, batch, value_coef=0.0, acceleration_loss=name)
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+        with torch.no_grad():
+            learnt[name] = float(policy(*preprocess(batch["views"][:1], batch["scalars"][:1]))[0])
+    assert learnt["squared"] == pytest.approx(0.15, abs=0.05)
+    assert learnt["absolute"] == pytest.approx(0.6, abs=0.05)
+
+
 def test_blocker_weight_multiplies_the_weight_of_labels_that_brake_for_a_blocker():
     policy, batch, (mu_acc, _, mu_sa, _) = _a_network_and_its_outputs_on_four_samples()
     labels = np.array([-0.6, -0.9, 0.2, -0.4], np.float32)  # two hard brakes, two others
@@ -598,3 +639,21 @@ def test_pretrain_refuses_a_driver_checkpoint_that_is_no_policy(tmp_path):
     result = crossway("pretrain", "--out", str(tmp_path / "never"), "--driver-checkpoint", "models/nothing-here.pt")
     assert result.returncode == 2 and "no checkpoint file" in result.stderr, result.stderr
     assert not (tmp_path / "never").exists()
+
+
+def test_pretrain_takes_the_absolute_acceleration_loss_and_records_it(tmp_path):
+    import json
+
+    from learner.pretrain import PretrainConfig, Pretrainer
+
+    out = tmp_path / "median"
+    result = crossway("pretrain", "--scenario", "easy", "--rounds", "1", "--steps-per-round", "50",
+                      "--acceleration-loss", "absolute", "--threads", "1", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    assert "absolute acceleration error" in result.stdout
+    assert json.loads((out / "pretrain.json").read_text())["config"]["acceleration_loss"] == "absolute"
+    refused = crossway("pretrain", "--scenario", "easy", "--acceleration-loss", "huber", "--out", str(tmp_path / "x"))
+    assert refused.returncode == 2 and "invalid choice: 'huber'" in refused.stderr
+    assert not (tmp_path / "x").exists()
+    with pytest.raises(ValueError, match="acceleration_loss must be one of"):
+        Pretrainer(PretrainConfig(scenario="easy", acceleration_loss="huber"))

@@ -105,6 +105,12 @@ def add_parser(subparsers) -> None:
                              "stood out --teacher-patience, although a car with priority is near: about 0.2%% of "
                              "the hard teacher's car-steps, the 'wait, then go' students have not learnt (pair it "
                              "with --standing-input, so the network sees how long it has stood). Default 1")
+    parser.add_argument("--acceleration-loss", choices=("squared", "absolute"), default="squared",
+                        help="the acceleration mean's error against the teacher's label: 'squared' fits the "
+                             "labels' mean, 'absolute' their median. Where the views cannot tell a state the "
+                             "teacher goes in from one it brakes in, the mean is a car that neither goes nor "
+                             "stops, the median the commoner of the two. progress.csv's action_loss_acc is then "
+                             "the mean absolute error. Default: squared")
     parser.add_argument("--priority-exponent", type=float, default=0.0, metavar="ALPHA",
                         help="draw training samples with probability proportional to (the student's acceleration "
                              "error + 0.15 m/s2) ** ALPHA, measured when it drove past them and each time they are "
@@ -234,7 +240,7 @@ def run(args) -> int:
         teacher_patience_s=args.teacher_patience, teacher_blocker_patience_s=args.teacher_blocker_patience,
         teacher_half_life=args.teacher_half_life,
         brake_weight=args.brake_weight, blocker_weight=args.blocker_weight, patience_weight=args.patience_weight,
-        priority_exponent=args.priority_exponent,
+        acceleration_loss=args.acceleration_loss, priority_exponent=args.priority_exponent,
         buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
         torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network,
         standing_input=args.standing_input, teacher_checkpoint=args.teacher_checkpoint,
