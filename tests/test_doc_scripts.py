@@ -382,3 +382,13 @@ def test_mixed_traffic_gives_each_car_to_the_driver_its_sign_names():
     teacher_only = _run_script("mixed_traffic.py", "--checkpoint", "models/hard-student-untangle2.pt",
                                "--policy-drives", "none", "--stop-episodes", "3", "--delay-max", "10", "--seed", "5")
     assert set(teacher_only["mean_speed_mps"]) == {"teacher"}
+    for run in (report, teacher_only):
+        stop = run["by_sign"]["stop"]  # every standing step of a stop-sign car is filed under 1+ reasons
+        stood = sum(stop[o] * stop.get(f"{o}_mean_stood_s", 0.0) for o in ("goal", "crash", "time_over"))
+        reasons = run["stop_sign_stood_for_s_per_episode"]
+        assert sum(reasons.values()) >= stood / stop["episodes"] - 0.01
+        assert max(reasons.values(), default=0.0) <= stood / stop["episodes"] + 0.01
+        assert all(r in ("blocker", "other") or r.startswith("priority ") for r in reasons)
+    # the teacher slows to 2 m/s for its stop line; a car without a sign keeps more of its speed
+    profile = teacher_only["speed_by_place_mps"]
+    assert profile["STOP"]["-4..+0 m"] < profile["NONE"]["-4..+0 m"]

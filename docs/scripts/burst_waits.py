@@ -36,37 +36,44 @@ SNAPSHOT_S = 37.0  # print the road when a burst car has been on it this long [s
 SNAPSHOT_STOOD_S = 15.0  # ... and has stood at least this long of it [s]
 
 
-def standing_reason(sim: Simulator, slot: int, idx: np.ndarray, higher: np.ndarray, sight: np.ndarray,
-                    entry_lane: np.ndarray) -> str:
-    """Why the car in ``slot`` stands (see the module's docstring); ``higher``, ``sight``: [a, b]
-    over the cars ``idx`` (priority, may show in a's view)."""
+def standing_for(sim: Simulator, slot: int, idx: np.ndarray, higher: np.ndarray, sight: np.ndarray,
+                 entry_lane: np.ndarray) -> list[tuple[str, int]]:
+    """The cars the car in ``slot`` may stand for, each as ("blocker" or "priority", its slot) (see
+    the module's docstring); ``higher``, ``sight``: [a, b] over the cars ``idx`` (priority, may show
+    in a's view), as ``sight_and_priority`` gives them."""
     table, half = sim.priority, 0.5 * VEHICLE_LENGTH
     a, ra = int(np.searchsorted(idx, slot)), sim.route[slot]
     front = sim.s[slot] + half
-    kinds = set()
+    found = []
     for b, other in enumerate(idx.tolist()):
         rb = sim.route[other]
         if (other == slot or not sight[a, b] or not table.conflict[ra, rb] or not math.isnan(table.merge_at[ra, rb])
                 or entry_lane[ra] == entry_lane[rb] or front > table.zone_start[ra, rb]):
             continue  # a shared lane is car following; a zone behind its front is no reason to stand
         if sim.s[other] + half >= table.zone_start[rb, ra] and sim.s[other] - half <= table.zone_end[rb, ra]:
-            kinds.add("blocker")
+            found.append(("blocker", other))
         elif higher[a, b] and (table.zone_start[rb, ra] - (sim.s[other] + half)
                                <= YIELD_HORIZON_S * max(sim.speed[other], sim.target_speed[other])):
-            kinds.add("priority")
-    return "+".join(sorted(kinds)) or "other"
+            found.append(("priority", other))
+    return found
 
 
-def standing_reasons(sim: Simulator, slots: list[int], entry_lane: np.ndarray) -> dict[int, str]:
-    """For each car in ``slots``: "moving", or why it stands (``standing_reason``), judged by what
-    a learner's view square shows."""
+def sight_and_priority(sim: Simulator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cars on the road (slots, ascending) and, over them, [a, b]: whether b has priority over a,
+    and whether b may show in a's view square."""
     idx = np.flatnonzero(sim.present)
-    higher = sim.priorities(idx)
     ego, views = idx[:, None], sim.spec.views
     sight = may_show(sim.x[ego], sim.y[ego], sim.heading[ego], sim.x[idx][None, :], sim.y[idx][None, :],
                      views.extent_m, views.shift_m)
-    return {slot: standing_reason(sim, slot, idx, higher, sight, entry_lane) if sim.speed[slot] < STANDING_MPS
-            else "moving" for slot in slots}
+    return idx, sim.priorities(idx), sight
+
+
+def standing_reasons(sim: Simulator, slots: list[int], entry_lane: np.ndarray) -> dict[int, str]:
+    """For each car in ``slots``: "moving", or why it stands ("blocker", "priority", both joined by
+    "+", or "other"), judged by what a learner's view square shows."""
+    idx, higher, sight = sight_and_priority(sim)
+    return {slot: "+".join(sorted({kind for kind, _ in standing_for(sim, slot, idx, higher, sight, entry_lane)}))
+            or "other" if sim.speed[slot] < STANDING_MPS else "moving" for slot in slots}
 
 
 def main() -> None:
