@@ -24,9 +24,9 @@ import math
 
 import numpy as np
 
-from script_driver import ScriptDriver, add_checkpoint_argument, needs_views
+from script_driver import HARD_TEACHER, ScriptDriver, add_checkpoint_argument, needs_views
 from evaluation.table1 import OUTCOMES, began_in_burst
-from simcore.controller import STANDING_MPS, YIELD_HORIZON_S, DriverOptions
+from simcore.controller import STANDING_MPS, YIELD_HORIZON_S
 from simcore.dynamics import DT, VEHICLE_LENGTH
 from simcore.scenario import SIGN_CHANGE_RESTARTS
 from simcore.simulator import SimConfig, Simulator
@@ -91,8 +91,7 @@ def main() -> None:
     sim = Simulator("hard", SimConfig(delay_min_s=0.0, delay_max_s=args.delay_max, observe=needs_views(args),
                                       sign_change_restart=args.sign_restart), seed=args.seed)
     result = sim.reset()
-    options = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
-                            wait_outside_zones=True, break_wait_cycles=True)
+    options = HARD_TEACHER
     driver = ScriptDriver(sim, options, args.checkpoint)
     junction = sim.intersection
     entry_lane = np.array([r.entry_lane for r in junction.routes])

@@ -32,14 +32,12 @@ import sys
 import numpy as np
 
 from burst_waits import sight_and_priority, standing_for
-from script_driver import ScriptDriver
-from simcore.controller import STANDING_MPS, DriverOptions, scripted_driver
+from script_driver import HARD_TEACHER, ScriptDriver
+from simcore.controller import STANDING_MPS, scripted_driver
 from simcore.dynamics import DT
 from simcore.rightofway import Sign
 from simcore.simulator import SimConfig, Simulator
 
-TEACHER = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
-                        wait_outside_zones=True, break_wait_cycles=True)
 OUTCOMES = ("goal", "crash", "time_over")
 PROFILE_FROM_M, PROFILE_TO_M, PROFILE_STEP_M = -8.0, 12.0, 4.0  # around the sign's line [m]
 SLOW_MPS = 3.0  # a car with priority under this speed is "slow" in the stood-for reasons [m/s]
@@ -67,8 +65,8 @@ def main() -> None:
 
     sim = Simulator("hard", SimConfig(delay_min_s=0.0, delay_max_s=args.delay_max, observe=True), seed=args.seed)
     result = sim.reset()
-    teacher = scripted_driver(sim, TEACHER)
-    policy = ScriptDriver(sim, TEACHER, args.checkpoint)
+    teacher = scripted_driver(sim, HARD_TEACHER)
+    policy = ScriptDriver(sim, HARD_TEACHER, args.checkpoint)
     stood_s: dict[int, float] = collections.defaultdict(float)
     entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])
     line_s = np.array([r.junction_entry_s for r in sim.intersection.routes])

@@ -19,7 +19,8 @@ import numpy as np
 
 from burst_waits import standing_reasons
 from evaluation.table1 import OUTCOMES
-from simcore.controller import PATIENCE_S, DriverOptions, scripted_driver
+from script_driver import HARD_TEACHER
+from simcore.controller import PATIENCE_S, scripted_driver
 from simcore.simulator import SimConfig, Simulator
 
 
@@ -31,8 +32,7 @@ def main() -> None:
     args = parser.parse_args()
     sim = Simulator("hard", SimConfig(delay_min_s=0.0, delay_max_s=args.delay_max, observe=False), seed=args.seed)
     sim.reset()
-    options = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
-                            wait_outside_zones=True, break_wait_cycles=True)
+    options = HARD_TEACHER
     teacher = scripted_driver(sim, options)
     entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])
     counts: collections.Counter = collections.Counter()

@@ -15,6 +15,11 @@ import numpy as np
 from simcore.controller import STANDING_MPS, DriverOptions, scripted_driver
 from simcore.dynamics import DT
 
+# the hard students' teacher: the scripted driver limited to the views, slowing to 2 m/s by its own
+# sign, braking for blockers, waiting outside zones, breaking cycles, its default 4 s / 8 s patience
+HARD_TEACHER = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
+                             wait_outside_zones=True, break_wait_cycles=True)
+
 
 def add_checkpoint_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--checkpoint", default=None,

@@ -22,14 +22,12 @@ import json
 import numpy as np
 
 from burst_waits import standing_reasons
-from script_driver import ScriptDriver, add_checkpoint_argument, needs_views
-from simcore.controller import STANDING_MPS, DriverOptions, scripted_driver
+from script_driver import HARD_TEACHER, ScriptDriver, add_checkpoint_argument, needs_views
+from simcore.controller import STANDING_MPS, scripted_driver
 from simcore.dynamics import VEHICLE_LENGTH
 from simcore.rightofway import Sign
 from simcore.simulator import SimConfig, Simulator
 
-TEACHER = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
-                        wait_outside_zones=True, break_wait_cycles=True)
 
 
 def main() -> None:
@@ -43,8 +41,8 @@ def main() -> None:
     sim = Simulator("hard", SimConfig(delay_min_s=0.0, delay_max_s=args.delay_max, observe=needs_views(args)),
                     seed=args.seed)
     result = sim.reset()
-    teacher = scripted_driver(sim, TEACHER)  # asked every step (it keeps its own standing clocks)
-    policy = ScriptDriver(sim, TEACHER, args.checkpoint) if args.checkpoint is not None else None
+    teacher = scripted_driver(sim, HARD_TEACHER)  # asked every step (it keeps its own standing clocks)
+    policy = ScriptDriver(sim, HARD_TEACHER, args.checkpoint) if args.checkpoint is not None else None
     entry_lane = np.array([r.entry_lane for r in sim.intersection.routes])
     line_s = np.array([r.junction_entry_s for r in sim.intersection.routes])
     stands: dict[int, list] = collections.defaultdict(list)  # slot -> (place, reason, teacher go, policy go, released)
