@@ -75,23 +75,33 @@ class Caution:
     line) is not held back and a car driving on is. ``signs`` limits it to the cars whose own sign
     is one of those, as their newest view shows it (``sign_in_view``: a stop line, a yield line, or
     none in sight). Steering and values keep the mean.
+
+    A negative c is boldness (session 34): the members' mean plus |c| standard deviations, the
+    eager side of their vote. ``full_below_speed_mps`` scales c the other way from
+    ``full_from_speed_mps``: all of it at a standstill, falling linearly to 0 at that speed, so that
+    only slow cars are touched (a car with priority dawdling at its line, docs/imitation.md, session 34).
     """
 
     std_factor: float  # c, in standard deviations of the members' acceleration pre-activations
     fade_standing_s: float | None = None  # [s]; None: c holds however long the car stands
     full_from_speed_mps: float | None = None  # [m/s]; None: c at every speed
     signs: tuple[str, ...] | None = None  # sign names ("none", "yield", "stop"); None: every car
+    full_below_speed_mps: float | None = None  # [m/s]; None: c at every speed
 
     def __post_init__(self):
-        if not (isinstance(self.std_factor, (int, float)) and math.isfinite(self.std_factor)
-                and self.std_factor >= 0):
-            raise ValueError(f"caution: std_factor must be a number >= 0, got {self.std_factor!r}")
+        if not (isinstance(self.std_factor, (int, float)) and math.isfinite(self.std_factor)):
+            raise ValueError(f"caution: std_factor must be a finite number (negative: boldness), "
+                             f"got {self.std_factor!r}")
         if self.fade_standing_s is not None and not (isinstance(self.fade_standing_s, (int, float))
                                                      and self.fade_standing_s > 0):
             raise ValueError(f"caution: fade_standing_s must be > 0 s or None, got {self.fade_standing_s!r}")
         if self.full_from_speed_mps is not None and not (isinstance(self.full_from_speed_mps, (int, float))
                                                          and self.full_from_speed_mps > 0):
             raise ValueError(f"caution: full_from_speed_mps must be > 0 m/s or None, got {self.full_from_speed_mps!r}")
+        if self.full_below_speed_mps is not None and not (isinstance(self.full_below_speed_mps, (int, float))
+                                                          and self.full_below_speed_mps > 0):
+            raise ValueError(f"caution: full_below_speed_mps must be > 0 m/s or None, "
+                             f"got {self.full_below_speed_mps!r}")
         if self.signs is not None:
             if isinstance(self.signs, str) or not isinstance(self.signs, (tuple, list)):
                 raise ValueError(f"caution: signs must be a list of sign names or None, got {self.signs!r}")
@@ -118,6 +128,8 @@ class Caution:
             factor = factor * (1 - scalars[:, 2] / self.fade_standing_s).clamp(min=0.0)
         if self.full_from_speed_mps is not None:
             factor = factor * (scalars[:, 0] / self.full_from_speed_mps).clamp(0.0, 1.0)
+        if self.full_below_speed_mps is not None:
+            factor = factor * (1 - scalars[:, 0] / self.full_below_speed_mps).clamp(0.0, 1.0)
         return factor
 
     def record(self) -> dict:
@@ -126,9 +138,12 @@ class Caution:
 
     def describe(self) -> str:
         """The rule in words, as notes and messages give it."""
-        return (f"acceleration minus {self.std_factor:g} standard deviations"
+        side = "minus" if self.std_factor >= 0 else "plus"
+        return (f"acceleration {side} {abs(self.std_factor):g} standard deviations"
                 + ("" if self.fade_standing_s is None else f" fading over {self.fade_standing_s:g} s standing")
                 + ("" if self.full_from_speed_mps is None else f", all of it from {self.full_from_speed_mps:g} m/s")
+                + ("" if self.full_below_speed_mps is None
+                   else f", all of it at a standstill, none from {self.full_below_speed_mps:g} m/s")
                 + ("" if self.signs is None else f", for cars at {' / '.join(self.signs)} signs only"))
 
 

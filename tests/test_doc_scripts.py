@@ -318,6 +318,14 @@ def test_ensemble_writes_one_network_driving_by_its_members_mean_and_refuses_oth
     assert result.returncode == 0, result.stderr
     assert "for cars at none / yield signs only" in result.stdout
     assert load_policy(by_sign).caution == Caution(0.5, signs=("none", "yield"))
+    bold = tmp_path / "bold.pt"  # a negative C: boldness, here for slow cars with priority only
+    result = subprocess.run([sys.executable, script, str(bold), str(again), "--caution=-1", "--caution-signs",
+                             "none,yield", "--caution-full-below-speed", "4"], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert ("acceleration plus 1 standard deviations, all of it at a standstill, none from 4 m/s, "
+            "for cars at none / yield signs only") in result.stdout
+    assert load_policy(bold).caution == Caution(-1.0, signs=("none", "yield"), full_below_speed_mps=4.0)
     exported = export_policy(cautious, tmp_path / "exported.pt")
     assert load_policy(exported).caution == Caution(0.5, 3.0)  # export keeps the rule
     state = torch.load(cautious, weights_only=False)
@@ -325,7 +333,8 @@ def test_ensemble_writes_one_network_driving_by_its_members_mean_and_refuses_oth
     torch.save(state, tmp_path / "bad-caution.pt")
     with pytest.raises(ValueError, match="bad-caution.pt: caution: std_factor"):
         load_policy(tmp_path / "bad-caution.pt")
-    for bad_args, message in (([str(first), "--caution", "-1"], "std_factor must be"),
+    for bad_args, message in (([str(first), str(second), "--caution", "nan"], "std_factor must be"),
+                              ([str(first), str(second), "--caution-full-below-speed", "4"], "need --caution"),
                               ([str(first)], "at least two members"),
                               ([str(first), str(second), "--caution-fade-standing", "2"], "need --caution"),
                               ([str(first), str(second), "--caution", "1", "--caution-signs", "none,amber"],

@@ -355,11 +355,22 @@ def test_a_cautious_ensemble_brakes_by_its_members_disagreement_and_fades_with_s
     with pytest.raises(ValueError, match="members side by side"):
         PolicyDriver(sim, joined, members=1)
     with pytest.raises(ValueError, match="std_factor"):
-        Caution(-0.5)
+        Caution(float("nan"))
     with pytest.raises(ValueError, match="fade_standing_s"):
         Caution(0.5, 0.0)
     with pytest.raises(ValueError, match="full_from_speed_mps"):
         Caution(0.5, None, -1.0)
+    bold = ensemble(members)  # boldness of slow cars: mean + 0.8 std at a standstill, none from 4 m/s
+    bold.caution = Caution(-0.8, full_below_speed_mps=4.0)
+    bold_means, _ = PolicyDriver(sim, bold).heads(views, scalars)
+    factor = -0.8 * np.clip(1 - scalars[:, 0] / 4.0, 0, 1)
+    assert factor.min() < -0.1  # some cars slow enough to be made bolder
+    np.testing.assert_allclose(bold_means[:, 0], np.tanh(mean[:, 0] - factor * spread), atol=1e-4)
+    assert (bold_means[:, 0] >= plain_means[:, 0] - 1e-6).all()  # boldness never brakes harder
+    assert "plus 0.8 standard deviations" in bold.caution.describe()
+    assert Caution(**bold.caution.record()) == bold.caution
+    with pytest.raises(ValueError, match="full_below_speed_mps"):
+        Caution(-0.5, full_below_speed_mps=0.0)
 
 
 def test_caution_by_sign_reads_each_cars_sign_from_its_view_and_spares_the_others():

@@ -1,7 +1,7 @@
 """Join several policies into one that drives by the mean of their outputs (session 22).
 
     python docs/scripts/ensemble.py OUT.pt CKPT CKPT [CKPT ...] [--caution C [--caution-fade-standing S]
-        [--caution-full-from-speed V] [--caution-signs none,yield]]
+        [--caution-full-from-speed V] [--caution-full-below-speed V] [--caution-signs none,yield]]
     python docs/scripts/ensemble.py OUT.pt ENSEMBLE.pt --caution C   (the same members, another rule)
 
 Writes one checkpoint that holds every member's weights and sizes; every crossway command loads
@@ -18,7 +18,11 @@ runs the members side by side, at less than the cost of all of them one after th
 disagree: its acceleration is tanh of the members' mean pre-activation minus C of their standard
 deviations; ``--caution-fade-standing S`` lets C fall to 0 over S seconds of standing still,
 ``--caution-full-from-speed V`` scales C with the car's speed (0 at standstill, all of it from V m/s),
+``--caution-full-below-speed V`` the other way (all of it at standstill, 0 from V m/s),
 ``--caution-signs`` limits it to cars whose view shows one of those signs (``algo.policy.sign_in_view``).
+A negative C (session 34) is boldness: the members' mean plus |C| standard deviations, the eager
+side of their vote (``--caution -1 --caution-full-below-speed 4 --caution-signs none,yield``: the
+cars with priority that dawdle near their line go on it).
 Without it the rule of an ensemble among the checkpoints is dropped (the plain mean)."""
 
 from __future__ import annotations
@@ -65,22 +69,28 @@ def main() -> None:
                         help="policies to join (checkpoints or models/*.pt): two or more, or one ensemble")
     parser.add_argument("--caution", type=float, default=None, metavar="C",
                         help="brake where the members disagree: acceleration = tanh(mean - C x standard deviation "
-                             "of the members' pre-activations); default: the plain mean")
+                             "of the members' pre-activations); a negative C is boldness (mean plus |C| standard "
+                             "deviations); default: the plain mean")
     parser.add_argument("--caution-fade-standing", type=float, default=None, metavar="S",
                         help="C falls linearly to 0 over S seconds of standing still (under 0.5 m/s) [s]")
     parser.add_argument("--caution-full-from-speed", type=float, default=None, metavar="V",
                         help="C grows linearly with the car's speed, from 0 at standstill to all of it at V m/s")
+    parser.add_argument("--caution-full-below-speed", type=float, default=None, metavar="V",
+                        help="C falls linearly with the car's speed, from all of it at standstill to 0 at V m/s "
+                             "(only slow cars are touched)")
     parser.add_argument("--caution-signs", default=None, metavar="SIGNS",
                         help="brake only cars whose view shows one of these signs, comma-separated from "
                              "none, yield, stop (e.g. none,yield); default: every car")
     args = parser.parse_args()
     if (args.caution_fade_standing is not None or args.caution_full_from_speed is not None
-            or args.caution_signs is not None) and args.caution is None:
-        parser.error("--caution-fade-standing, --caution-full-from-speed and --caution-signs need --caution")
+            or args.caution_full_below_speed is not None or args.caution_signs is not None) and args.caution is None:
+        parser.error("--caution-fade-standing, --caution-full-from-speed, --caution-full-below-speed and "
+                     "--caution-signs need --caution")
     try:
         signs = None if args.caution_signs is None else tuple(s.strip() for s in args.caution_signs.split(","))
         caution = (None if args.caution is None else
-                   Caution(args.caution, args.caution_fade_standing, args.caution_full_from_speed, signs))
+                   Caution(args.caution, args.caution_fade_standing, args.caution_full_from_speed, signs,
+                           args.caution_full_below_speed))
         joined = joined_checkpoint(args.checkpoints, caution)
     except ValueError as error:
         sys.exit(f"ensemble: {error}")
