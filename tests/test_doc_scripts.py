@@ -401,3 +401,34 @@ def test_mixed_traffic_gives_each_car_to_the_driver_its_sign_names():
     # the teacher slows to 2 m/s for its stop line; a car without a sign keeps more of its speed
     profile = teacher_only["speed_by_place_mps"]
     assert profile["STOP"]["-4..+0 m"] < profile["NONE"]["-4..+0 m"]
+
+
+def test_sign_split_drives_stop_sign_cars_with_one_policy_and_the_rest_with_the_other():
+    sys.path.insert(0, str(ROOT / "docs/scripts"))
+    try:
+        from sign_split import SignSplitDriver
+    finally:
+        sys.path.pop(0)
+    from algo.policy import ACTION_SCALE, load_policy, sign_in_view
+    from evaluation.policy import PolicyDriver
+    from simcore.simulator import SimConfig, Simulator
+
+    stop_policy, other_policy = "models/hard-student-untangle2.pt", "models/hard-student-untangle.pt"
+    sim = Simulator("hard", SimConfig(delay_max_s=0.0), seed=3)
+    result = sim.reset()
+    throttle = np.zeros((sim.num_slots, 2))
+    throttle[:, 0] = 1.0  # m/s^2: every car rolls towards its line, until some see a stop line
+    for _ in range(40):
+        result = sim.step(throttle)
+    active = np.flatnonzero(sim.learners_present)
+    at_stop = sign_in_view(result.views[active]) == "stop"
+    assert at_stop.any() and (~at_stop).any()
+    actions = SignSplitDriver(sim, ROOT / stop_policy, ROOT / other_policy).act(result)
+    for cars, checkpoint in ((at_stop, stop_policy), (~at_stop, other_policy)):
+        slots = active[cars]
+        means, _ = PolicyDriver(sim, load_policy(ROOT / checkpoint)).heads(result.views[slots], result.scalars[slots])
+        np.testing.assert_allclose(actions[slots], np.clip(means, -1, 1) * ACTION_SCALE, atol=1e-6)
+    report = _run_script("sign_split.py", "--stop-checkpoint", stop_policy, "--other-checkpoint", other_policy,
+                         "--episodes", "12", "--seed", "4")
+    assert sum(sum(c.values()) for c in report["counts"].values()) == 12
+    assert set(report["reach"]) <= {"none", "yield", "stop"} and all(0 <= r <= 1 for r in report["reach"].values())
