@@ -92,16 +92,10 @@ class Caution:
         if not (isinstance(self.std_factor, (int, float)) and math.isfinite(self.std_factor)):
             raise ValueError(f"caution: std_factor must be a finite number (negative: boldness), "
                              f"got {self.std_factor!r}")
-        if self.fade_standing_s is not None and not (isinstance(self.fade_standing_s, (int, float))
-                                                     and self.fade_standing_s > 0):
-            raise ValueError(f"caution: fade_standing_s must be > 0 s or None, got {self.fade_standing_s!r}")
-        if self.full_from_speed_mps is not None and not (isinstance(self.full_from_speed_mps, (int, float))
-                                                         and self.full_from_speed_mps > 0):
-            raise ValueError(f"caution: full_from_speed_mps must be > 0 m/s or None, got {self.full_from_speed_mps!r}")
-        if self.full_below_speed_mps is not None and not (isinstance(self.full_below_speed_mps, (int, float))
-                                                          and self.full_below_speed_mps > 0):
-            raise ValueError(f"caution: full_below_speed_mps must be > 0 m/s or None, "
-                             f"got {self.full_below_speed_mps!r}")
+        for name, unit in (("fade_standing_s", "s"), ("full_from_speed_mps", "m/s"), ("full_below_speed_mps", "m/s")):
+            value = getattr(self, name)
+            if value is not None and not (isinstance(value, (int, float)) and value > 0):
+                raise ValueError(f"caution: {name} must be > 0 {unit} or None, got {value!r}")
         if self.signs is not None:
             if isinstance(self.signs, str) or not isinstance(self.signs, (tuple, list)):
                 raise ValueError(f"caution: signs must be a list of sign names or None, got {self.signs!r}")

@@ -72,6 +72,15 @@ def delay_schedule(training_delay_max_s: float) -> list[float]:
     return [10.0 * (i + 1) for i in range(count)]
 
 
+def chunks_of(test: TestSpec) -> list[TestSpec]:
+    """A test as the jobs the protocol runs: chunks of at most CHUNK_EPISODES episodes, each with
+    its own simulator and seed (the test's, + 1000 per chunk), so every worker stays busy to the
+    end; the chunks do not depend on --workers."""
+    return [replace(test, episodes=min(CHUNK_EPISODES, test.episodes - start),
+                    seed=test.seed + 1000 * (start // CHUNK_EPISODES))
+            for start in range(0, test.episodes, CHUNK_EPISODES)]
+
+
 def run_test(spec: TestSpec, progress=None) -> dict:
     """One test: counts per sign and end reason, summed speeds; runs in a worker process."""
     import torch
@@ -380,11 +389,7 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
     # a test's seed is its place in the whole protocol: a shorter sweep runs the same tests
     tests = [TestSpec(spec, d, episodes, seed + i, checkpoint, scripted)
              for i, d in enumerate(schedule) if sweep_up_to_s is None or d <= sweep_up_to_s]
-    # each test runs as chunks of at most CHUNK_EPISODES episodes (own simulator, own seed), so
-    # every worker stays busy to the end; the chunks do not depend on --workers
-    chunks = [replace(t, episodes=min(CHUNK_EPISODES, t.episodes - start),
-                      seed=t.seed + 1000 * (start // CHUNK_EPISODES))
-              for t in tests for start in range(0, t.episodes, CHUNK_EPISODES)]
+    chunks = [chunk for t in tests for chunk in chunks_of(t)]
     started = time.monotonic()
     kept, salt, jobs = partial_dir(out_dir, f"table1-{spec.name}"), cache_salt(checkpoint), [(c,) for c in chunks]
     resumed = kept_jobs(run_test, jobs, kept, salt)  # finished chunks of an earlier run, stopped

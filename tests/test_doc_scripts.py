@@ -432,3 +432,10 @@ def test_sign_split_drives_stop_sign_cars_with_one_policy_and_the_rest_with_the_
                          "--episodes", "12", "--seed", "4")
     assert sum(sum(c.values()) for c in report["counts"].values()) == 12
     assert set(report["reach"]) <= {"none", "yield", "stop"} and all(0 <= r <= 1 for r in report["reach"].values())
+    for bad_args, message in ((["--stop-checkpoint", "missing.pt", "--other-checkpoint", other_policy],
+                               "no checkpoint file 'missing.pt'"),
+                              (["--stop-checkpoint", stop_policy, "--other-checkpoint", other_policy, "--episodes", "0"],
+                               "--episodes must be at least 1")):
+        refused = subprocess.run([sys.executable, str(ROOT / "docs/scripts/sign_split.py"), *bad_args],
+                                 capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert refused.returncode != 0 and message in refused.stderr, refused.stderr

@@ -25,8 +25,8 @@ import numpy as np
 
 import evaluation.policy
 from algo.policy import ACTION_SCALE, load_policy, sign_in_view
-from evaluation.table1 import CHUNK_EPISODES, TestSpec, merge_chunks, run_test
-from simcore.scenario import load_scenario
+from evaluation.table1 import TestSpec, chunks_of, merge_chunks, run_test
+from simcore.scenario import ScenarioError, load_scenario
 
 PolicyDriver = evaluation.policy.PolicyDriver  # the plain driver, kept before run_test's is replaced
 
@@ -63,21 +63,22 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=3000)
     parser.add_argument("--seed", type=int, default=0, help="the test's seed, as --seed of crossway evaluate table1")
     args = parser.parse_args()
+    if args.episodes < 1:
+        parser.error(f"--episodes must be at least 1, got {args.episodes}")
     try:
+        spec = load_scenario(args.scenario)
         for checkpoint in (args.stop_checkpoint, args.other_checkpoint):
-            load_policy(checkpoint)  # refuse a bad file before driving
-    except ValueError as error:
+            evaluation.policy.check_checkpoint(checkpoint, spec)  # a bad file or other views: refused before driving
+    except (ScenarioError, ValueError) as error:
         sys.exit(f"sign_split: {error}")
-    spec = load_scenario(args.scenario)
     evaluation.policy.PolicyDriver = lambda sim, _policy: SignSplitDriver(sim, args.stop_checkpoint,
                                                                           args.other_checkpoint)
     started = time.monotonic()
-    parts = []
-    for start in range(0, args.episodes, CHUNK_EPISODES):
-        chunk = TestSpec(spec, args.delay_max, min(CHUNK_EPISODES, args.episodes - start),
-                         args.seed + 1000 * (start // CHUNK_EPISODES), args.stop_checkpoint)
+    parts, done = [], 0
+    for chunk in chunks_of(TestSpec(spec, args.delay_max, args.episodes, args.seed, args.stop_checkpoint)):
         parts.append(run_test(chunk))
-        print(f"sign_split: {start + chunk.episodes}/{args.episodes} episodes, {time.monotonic() - started:.0f} s",
+        done += chunk.episodes
+        print(f"sign_split: {done}/{args.episodes} episodes, {time.monotonic() - started:.0f} s",
               file=sys.stderr, flush=True)
     test = merge_chunks(parts)[0]
     reach = {sign: round(c.get("goal", 0) / sum(c.values()), 4) for sign, c in test["counts"].items()}
