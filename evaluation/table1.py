@@ -33,9 +33,11 @@ OUTCOMES = ("goal", "crash", "off_path", "time_over")
 COLUMN_NAMES = {"goal": "Reaches", "crash": "Crashes", "off_path": "Off-roads", "time_over": "Time-overs"}
 
 CHUNK_EPISODES = 500  # a test's episodes per worker job
-# how an episode began: within BURST_WINDOW_S after a sign redraw of the hard junction (with
-# sign_change_restart "together" every lane starts then, eight cars at once), or otherwise
-STARTS = ("burst", "staggered")
+# how an episode began: at the reset of its chunk's simulator (every lane's first episode of the
+# chunk, all lanes at once: SimConfig.start_all_at_reset), within BURST_WINDOW_S after a sign redraw
+# of the hard junction (with sign_change_restart "together" every lane starts then, eight cars at
+# once), or otherwise
+STARTS = ("reset", "burst", "staggered")
 BURST_WINDOW_S = 2 * DT  # [s]
 
 
@@ -106,6 +108,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
     # could have cut them, so their outcomes are not thinned by the cut
     uncuttable: dict[str, Counter] = defaultdict(Counter)
     started_s = {v: sim.time_s for v in np.flatnonzero(result.started).tolist()}  # slot -> its episode's start [s]
+    reset_s = sim.time_s  # when the reset started every lane [s]; later episodes begin after it
     redraw_due_s = dict.fromkeys(started_s, sim.next_sign_change_s)  # slot -> the next redraw when it began [s]
     redraws_s: list[float] = []  # when the signs were redrawn and every lane restarted [s]
     done = 0
@@ -123,7 +126,9 @@ def run_test(spec: TestSpec, progress=None) -> dict:
                 continue  # cut short by a sign change: not an outcome
             counts[episode.sign][episode.end_reason] += 1
             speed_sum[episode.sign] += episode.mean_speed_mps
-            by_start["burst" if began_in_burst(start_s, redraws_s) else "staggered"][episode.sign][episode.end_reason] += 1
+            kind = ("reset" if start_s == reset_s else "burst" if began_in_burst(start_s, redraws_s)
+                    else "staggered")
+            by_start[kind][episode.sign][episode.end_reason] += 1
             if (sim.sign_interval_s > 0.0 and start_s is not None and due_s is not None
                     and start_s + sim.time_limit_s + DT <= due_s + 1e-9):
                 uncuttable[episode.sign][episode.end_reason] += 1
@@ -329,11 +334,14 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
                      f"which no redraw could cut ({uncut['all']['episodes']}, all tests pooled), reaches per "
                      f"sign are {cells}.\n")
     page += f"\n## Per test\n\n![reach per test and sign]({png_path.name})\n\n" + markdown_tests(test_rows)
-    if "burst" in starts:  # signs redrawn during the tests (hard)
-        when = ("when every lane starts at once" if meta.get("sign_change_restart") == "together"
-                else "each lane after its own random delay, a short one here")
-        page += (f"\n## By how the episodes began\n\nburst: within two steps of a sign redraw ({when}); "
-                 "staggered: every other episode. All tests pooled.\n\n" + markdown_starts(starts))
+    if len(starts) > 1:
+        page += ("\n## By how the episodes began\n\nreset: every lane's first episode in each job of at most "
+                 f"{CHUNK_EPISODES} episodes, all lanes at once when the job's simulator starts; ")
+        if "burst" in starts:  # signs redrawn during the tests (hard)
+            when = ("when every lane starts at once" if meta.get("sign_change_restart") == "together"
+                    else "each lane after its own random delay, a short one here")
+            page += f"burst: within two steps of a sign redraw ({when}); "
+        page += "staggered: every other episode. All tests pooled.\n\n" + markdown_starts(starts)
     md_path.write_text(page)
     return [json_path, csv_path, tests_csv_path, starts_csv_path, png_path, md_path]
 

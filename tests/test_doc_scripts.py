@@ -135,17 +135,18 @@ def test_burst_starts_splits_table1s_own_episodes_by_how_they_began():
     assert report["sign_change_restart"] == "together"
     split = report["counts"]
     assert report["summary"]["burst/all"]["episodes"] > 0 and report["summary"]["staggered/all"]["episodes"] > 0
-    # the same episodes crossway evaluate table1 counts for that test (same seed), only split in two
+    # the same episodes crossway evaluate table1 counts for that test (same seed), only split by start
     options = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
                             wait_outside_zones=True, break_wait_cycles=True)
     table1 = run_test(TestSpec(_hard_restarting("together"), 10.0, 90, seed=5, checkpoint=None,
                                scripted=options))["counts"]
     for sign, outcomes in table1.items():
         for outcome, n in outcomes.items():
-            assert split["burst"].get(sign, {}).get(outcome, 0) + split["staggered"].get(sign, {}).get(outcome, 0) == n
+            assert sum(split[kind].get(sign, {}).get(outcome, 0) for kind in ("reset", "burst", "staggered")) == n
+    assert report["summary"]["reset/all"]["episodes"] == 8  # the test's one job: its eight lanes' first episodes
     never = _run_script("burst_starts.py", "--delays", "10", "--episodes", "90", "--workers", "1", "--seed", "5",
                         "--sign-change-interval", "0", *teacher)
-    assert never["counts"]["burst"] == {} and never["summary"]["staggered/all"]["episodes"] == 90
+    assert never["counts"]["burst"] == {} and never["summary"]["staggered/all"]["episodes"] == 90 - 8
 
 
 def test_burst_waits_accounts_for_every_second_of_every_episode():
@@ -439,3 +440,26 @@ def test_sign_split_drives_stop_sign_cars_with_one_policy_and_the_rest_with_the_
         refused = subprocess.run([sys.executable, str(ROOT / "docs/scripts/sign_split.py"), *bad_args],
                                  capture_output=True, text=True, timeout=120, cwd=ROOT)
         assert refused.returncode != 0 and message in refused.stderr, refused.stderr
+
+
+def test_reset_starts_replays_the_episodes_table1_began_at_each_jobs_reset(tmp_path):
+    """docs/results/reset-starts/reset_starts.py replays a Table I run's jobs until the episodes
+    begun at each reset end: the same counts as the run's own "reset" start kind, test by test."""
+    teacher = ("--scripted-sight", "view", "--scripted-approach-speed", "2", "--scripted-approach-signs", "own",
+               "--scripted-brake-for-blockers", "--scripted-wait-outside-zones", "--scripted-break-wait-cycles")
+    run = subprocess.run([sys.executable, "-m", "crossway", "evaluate", "table1", "--scripted", *teacher,
+                          "--scenario", "easy", "--episodes", "20", "--workers", "1", "--seed", "3",
+                          "--out", str(tmp_path)], capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert run.returncode == 0, run.stderr
+    table1 = json.loads((tmp_path / "table1-easy.json").read_text())
+    result = subprocess.run([sys.executable, str(ROOT / "docs/results/reset-starts/reset_starts.py"), "teacher",
+                             "--scenario", "easy", "--episodes", "20", "--seed", "3",
+                             "--table1-json", str(tmp_path / "table1-easy.json")],
+                            capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout.splitlines()[-1])
+    for test in table1["tests"]:
+        assert report["per_test"][f"{test['delay_max_s']:g}"] == test["counts_by_start"]["reset"]
+    for sign, reach in report["reach"].items():
+        assert reach["all"] == pytest.approx(table1["table"][sign]["goal"], abs=1e-4)
+        assert 0.0 <= reach["without_reset"] <= 1.0

@@ -92,7 +92,8 @@ def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
     """Hard redraws its signs every 120 s and restarts every lane: Table I says how the episodes
     that began right after a redraw did, apart from the others (none of them on easy). With
     --sign-restart together every lane starts at once then, a burst of eight; by default each
-    waits its own random delay, and few episodes begin within two steps of a redraw."""
+    waits its own random delay, and few episodes begin within two steps of a redraw. Every lane's
+    first episode of a job began at the job's reset, all lanes at once: those are counted apart too."""
     result = crossway("evaluate", "table1", "--scripted", "--scenario", "hard", "--episodes", "40",
                       "--workers", "2", "--sign-restart", "together", "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
@@ -100,7 +101,10 @@ def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
     assert report["meta"]["sign_change_restart"] == "together" and report["meta"]["sign_change_interval_s"] == 120
     starts = report["by_start"]
     assert starts["burst"]["all"]["episodes"] > 0 and starts["staggered"]["all"]["episodes"] > 0
-    assert starts["burst"]["all"]["episodes"] + starts["staggered"]["all"]["episodes"] == 400
+    assert starts["burst"]["all"]["episodes"] + starts["staggered"]["all"]["episodes"] + \
+        starts["reset"]["all"]["episodes"] == 400
+    # one job per test (40 episodes): its eight lanes' first episodes, unless a redraw cut one
+    assert 0 < starts["reset"]["all"]["episodes"] <= 8 * 10
     for sign in ("none", "yield", "stop"):  # every counted episode in one of the two, sign by sign
         pooled = sum(starts[k][sign]["episodes"] for k in starts if sign in starts[k])
         assert pooled == report["table"][sign]["episodes"]
@@ -109,7 +113,7 @@ def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
             assert sum(row[o] for o in ("goal", "crash", "off_path", "time_over")) == pytest.approx(1.0)
     lines = list(csv.DictReader(open(tmp_path / "table1-hard-starts.csv")))
     assert list(lines[0]) == ["began", "sign", "episodes", "goal", "crash", "off_path", "time_over"]
-    assert {r["began"] for r in lines} == {"burst", "staggered"}
+    assert {r["began"] for r in lines} == {"reset", "burst", "staggered"}
     assert "when every lane starts at once" in (tmp_path / "table1-hard.md").read_text()
 
     delayed = crossway("evaluate", "table1", "--scripted", "--scenario", "hard", "--episodes", "40",
@@ -118,7 +122,8 @@ def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
     report = json.loads((tmp_path / "delayed" / "table1-hard.json").read_text())
     assert report["meta"]["sign_change_restart"] == "delayed"  # the scenario file's default
     bursts = report["by_start"].get("burst", {}).get("all", {}).get("episodes", 0)
-    assert bursts + report["by_start"]["staggered"]["all"]["episodes"] == 400
+    assert bursts + report["by_start"]["staggered"]["all"]["episodes"] + \
+        report["by_start"]["reset"]["all"]["episodes"] == 400
     assert bursts < starts["burst"]["all"]["episodes"] / 4  # the cars no longer start together
     cut = sum(sum(t["cut_by_redraw"].values()) for t in report["tests"])
     assert cut > 0  # 40 episodes a test outlast a redraw; those cut short are counted apart
@@ -130,11 +135,16 @@ def test_table1_splits_hards_episodes_by_how_they_began(tmp_path):
         pytest.approx(1.0)
     assert f"which no redraw could cut ({uncut['episodes']}, all tests pooled)" in page
 
-    easy = crossway("evaluate", "table1", "--scripted", "--scenario", "easy", "--episodes", "5", "--workers", "1",
+    # easy never redraws, so no bursts; each of its three tests (one job of 20 episodes) begins with
+    # its three lanes at once, and nothing cuts those episodes short
+    easy = crossway("evaluate", "table1", "--scripted", "--scenario", "easy", "--episodes", "20", "--workers", "1",
                     "--out", str(tmp_path / "easy"))
     assert easy.returncode == 0, easy.stderr
-    assert set(json.loads((tmp_path / "easy" / "table1-easy.json").read_text())["by_start"]) == {"staggered"}
-    assert "## By how the episodes began" not in (tmp_path / "easy" / "table1-easy.md").read_text()
+    starts = json.loads((tmp_path / "easy" / "table1-easy.json").read_text())["by_start"]
+    assert set(starts) == {"reset", "staggered"}
+    assert starts["reset"]["all"]["episodes"] == 3 * 3 and starts["staggered"]["all"]["episodes"] == 3 * 20 - 9
+    page = (tmp_path / "easy" / "table1-easy.md").read_text()
+    assert "## By how the episodes began" in page and "burst:" not in page and "| reset |" in page
 
 
 def test_table1_scripted_with_the_views_sight(tmp_path):

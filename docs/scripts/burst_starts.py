@@ -12,8 +12,9 @@ right-of-way test; by default each lane waits its random delay (docs/simulator.m
 set-up (delay_min 0, the same seeds as ``crossway evaluate table1 --episodes N --seed S`` for a
 test of at most 500 episodes) with the view-limited scripted driver (the hard students' teacher by
 default) or a trained policy, and counts the outcomes per sign of the episodes that began within
-two steps of a redraw ("burst") and of the others ("staggered"), as ``crossway evaluate table1``
-does (its "By how the episodes began" table) with ``evaluation.table1.run_test``. ``--sign-change-interval``
+two steps of a redraw ("burst"), of every lane's first, begun at the reset ("reset"), and of the
+others ("staggered"), as ``crossway evaluate table1`` does (its "By how the episodes began" table)
+with ``evaluation.table1.run_test``. ``--sign-change-interval``
 overrides the scenario's interval (a what-if: 0 never redraws). Prints one JSON object on one line.
 """
 
