@@ -83,23 +83,30 @@ def chunks_of(test: TestSpec) -> list[TestSpec]:
             for start in range(0, test.episodes, CHUNK_EPISODES)]
 
 
-def run_test(spec: TestSpec, progress=None) -> dict:
-    """One test: counts per sign and end reason, summed speeds; runs in a worker process."""
-    import torch
-
-    from evaluation.policy import PolicyDriver, load_policy
+def start_test(spec: TestSpec):
+    """A job's simulator, just reset (every lane starting), its first ``StepResult`` and the driver's
+    ``act(result)`` -> actions [slots, 2]: the set-up ``run_test`` drives, for scripts that replay it."""
+    from evaluation.policy import PolicyDriver, load_policy  # looked up at call time (sign_split.py swaps it)
     from simcore.controller import scripted_driver
     from simcore.simulator import SimConfig, Simulator
 
-    torch.set_num_threads(1)
     sim = Simulator(spec.scenario, SimConfig(delay_min_s=0.0, delay_max_s=spec.delay_max_s,
                                              observe=spec.checkpoint is not None), seed=spec.seed)
     result = sim.reset()
     if spec.checkpoint is not None:
-        driver = PolicyDriver(sim, load_policy(spec.checkpoint))
-        act = lambda: driver.act(result)  # noqa: E731 - reads the newest result
+        act = PolicyDriver(sim, load_policy(spec.checkpoint)).act
     else:
-        act = scripted_driver(sim, spec.scripted).act
+        scripted = scripted_driver(sim, spec.scripted)
+        act = lambda _result: scripted.act()  # noqa: E731 - it reads the simulator itself
+    return sim, result, act
+
+
+def run_test(spec: TestSpec, progress=None) -> dict:
+    """One test: counts per sign and end reason, summed speeds; runs in a worker process."""
+    import torch
+
+    torch.set_num_threads(1)
+    sim, result, act = start_test(spec)
     counts: dict[str, Counter] = defaultdict(Counter)
     by_start: dict[str, dict[str, Counter]] = {kind: defaultdict(Counter) for kind in STARTS}
     speed_sum: Counter = Counter()
@@ -114,7 +121,7 @@ def run_test(spec: TestSpec, progress=None) -> dict:
     done = 0
     while done < spec.episodes:
         next_redraw_s = sim.next_sign_change_s
-        result = sim.step(act())
+        result = sim.step(act(result))
         if sim.next_sign_change_s != next_redraw_s:
             redraws_s.append(next_redraw_s)  # when it was due (also when the road stood empty)
         for episode in result.episodes:

@@ -17,36 +17,30 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from collections import Counter, defaultdict
+from pathlib import Path
 
 import numpy as np
 import torch
 
-from evaluation.policy import PolicyDriver, load_policy
-from evaluation.table1 import OUTCOMES, SIGNS, TestSpec, chunks_of, delay_schedule
-from simcore.controller import DriverOptions, scripted_driver
-from simcore.simulator import SimConfig, Simulator
-from simcore.scenario import load_scenario
+from evaluation.policy import check_checkpoint
+from evaluation.table1 import OUTCOMES, SIGNS, TestSpec, chunks_of, delay_schedule, start_test
+from simcore.controller import DriverOptions
+from simcore.scenario import ScenarioError, load_scenario
 
 TEACHER = DriverOptions(sight="view", approach_speed_mps=2.0, approach_signs="own", brake_for_blockers=True,
                         wait_outside_zones=True, break_wait_cycles=True)
 
 
-def reset_outcomes(job: TestSpec, policy) -> dict[str, Counter]:
+def reset_outcomes(job: TestSpec) -> dict[str, Counter]:
     """Sign -> end reason -> count of the episodes ``job``'s reset began ("cut": a redraw ended one)."""
-    sim = Simulator(job.scenario, SimConfig(delay_min_s=0.0, delay_max_s=job.delay_max_s, observe=policy is not None),
-                    seed=job.seed)
-    result = sim.reset()
-    if policy is not None:
-        driver = PolicyDriver(sim, policy)
-        act = lambda: driver.act(result)  # noqa: E731 - reads the newest result, as run_test's
-    else:
-        act = scripted_driver(sim, TEACHER).act
+    sim, result, act = start_test(job)
     pending = set(np.flatnonzero(result.started).tolist())
     counts: dict[str, Counter] = defaultdict(Counter)
     while pending:
-        result = sim.step(act())
+        result = sim.step(act(result))
         for episode in result.episodes:
             if episode.slot in pending:
                 pending.discard(episode.slot)
@@ -65,32 +59,44 @@ def main() -> None:
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
     torch.set_num_threads(1)
-    spec = load_scenario(args.scenario)
-    policy = None if args.checkpoint == "teacher" else load_policy(args.checkpoint)
+    checkpoint = None if args.checkpoint == "teacher" else args.checkpoint
+    run_tests = None
+    try:  # everything refused before the replay, not after it
+        spec = load_scenario(args.scenario)
+        if checkpoint is not None:
+            check_checkpoint(checkpoint, spec)  # a bad file or other views
+        if args.table1_json:
+            run = json.loads(Path(args.table1_json).read_text())
+            meta, run_tests = run["meta"], run["tests"]
+            if (meta["scenario"], meta["seed"], meta["episodes_per_test"]) != (spec.name, args.seed, args.episodes):
+                raise ValueError(f"{args.table1_json} is a run of {meta['scenario']} with --seed {meta['seed']} and "
+                                 f"--episodes {meta['episodes_per_test']}; pass those")
+    except (OSError, KeyError, ScenarioError, ValueError) as error:
+        sys.exit(f"reset_starts: {error}")
     started = time.time()
     per_test: dict[float, dict[str, Counter]] = {}
     for i, delay_max_s in enumerate(delay_schedule(spec.episodes.delay_max_s)):
-        test = TestSpec(spec, delay_max_s, args.episodes, args.seed + i, None, TEACHER)
+        test = TestSpec(spec, delay_max_s, args.episodes, args.seed + i, checkpoint, TEACHER)
         per_test[delay_max_s] = defaultdict(Counter)
         for job in chunks_of(test):
-            for sign, reasons in reset_outcomes(job, policy).items():
+            for sign, reasons in reset_outcomes(job).items():
                 per_test[delay_max_s][sign].update(reasons)
         print(f"delay_max {delay_max_s:g} s: {({s: dict(c) for s, c in per_test[delay_max_s].items()})} "
               f"({time.time() - started:.0f} s)", flush=True)
     report = {"checkpoint": args.checkpoint, "scenario": spec.name, "episodes": args.episodes, "seed": args.seed,
               "per_test": {f"{d:g}": {s: dict(c) for s, c in t.items()} for d, t in per_test.items()}}
-    if args.table1_json:
-        tests = json.loads(open(args.table1_json).read())["tests"]
+    if run_tests is not None:
         reach = {}
         for sign in SIGNS:
             with_them = without = 0.0
-            for test in tests:
+            for test in run_tests:
                 counts, theirs = test["counts"][sign], per_test[test["delay_max_s"]].get(sign, Counter())
                 n, goals = sum(counts.values()), counts.get("goal", 0)
                 counted = sum(v for k, v in theirs.items() if k != "cut")
                 with_them += goals / n
                 without += (goals - theirs.get("goal", 0)) / (n - counted)
-            reach[sign] = {"all": round(with_them / len(tests), 4), "without_reset": round(without / len(tests), 4)}
+            reach[sign] = {"all": round(with_them / len(run_tests), 4),
+                           "without_reset": round(without / len(run_tests), 4)}
         report["reach"] = reach
     print(json.dumps(report))
 
