@@ -463,3 +463,10 @@ def test_reset_starts_replays_the_episodes_table1_began_at_each_jobs_reset(tmp_p
     for sign, reach in report["reach"].items():
         assert reach["all"] == pytest.approx(table1["table"][sign]["goal"], abs=1e-4)
         assert 0.0 <= reach["without_reset"] <= 1.0
+    # refused before any replay: a run of another seed, a missing checkpoint
+    for bad_args, message in ((["teacher", "--scenario", "easy", "--episodes", "20", "--seed", "4",
+                                "--table1-json", str(tmp_path / "table1-easy.json")], "with --seed 3 and --episodes 20"),
+                              (["missing.pt", "--scenario", "easy"], "no checkpoint file 'missing.pt'")):
+        refused = subprocess.run([sys.executable, str(ROOT / "docs/results/reset-starts/reset_starts.py"), *bad_args],
+                                 capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert refused.returncode != 0 and message in refused.stderr and not refused.stdout, refused.stderr
