@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from evaluation.parallel import (cache_salt, clear_partial, kept_jobs, numeric_platform, partial_dir,
+from evaluation.parallel import (cache_salt, clear_partial, file_digest, kept_jobs, numeric_platform, partial_dir,
                                  platform_line, run_parallel)
 from simcore.controller import DriverOptions
 from simcore.dynamics import DT
@@ -81,6 +81,27 @@ def chunks_of(test: TestSpec) -> list[TestSpec]:
     return [replace(test, episodes=min(CHUNK_EPISODES, test.episodes - start),
                     seed=test.seed + 1000 * (start // CHUNK_EPISODES))
             for start in range(0, test.episodes, CHUNK_EPISODES)]
+
+
+def parse_share(text: str) -> tuple[int, int]:
+    """``"I/N"`` -> (I, N): the I-th of N shares of every test's jobs (``share_range``)."""
+    try:
+        index, count = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise ValueError(f"--share takes I/N, e.g. 2/3 (the second of three shares); got {text!r}") from None
+    if not 1 <= index <= count:
+        raise ValueError(f"--share I/N needs 1 <= I <= N; got {text!r}")
+    return index, count
+
+
+def share_range(share: tuple[int, int], jobs: int) -> tuple[int, int]:
+    """The jobs [first, stop) of a test of ``jobs`` jobs that share (I, N) runs: the I-th of N runs
+    of the protocol, each on its own machine, that together run every job once."""
+    index, count = share
+    if count > jobs:
+        raise ValueError(f"--share {index}/{count}: each test has only {jobs} job(s) of at most "
+                         f"{CHUNK_EPISODES} episodes to share out; use N <= {jobs}")
+    return (index - 1) * jobs // count, index * jobs // count
 
 
 def start_test(spec: TestSpec):
@@ -328,6 +349,18 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
         page += (f"Only the tests with delay_max {meta['delays_max_s'][0]:g} to {meta['delays_max_s'][-1]:g} s of "
                  f"the protocol's {protocol[0]:g} to {protocol[-1]:g} s: the paper's columns are for the whole "
                  "protocol, so ours compare with them only loosely.\n\n")
+    if meta.get("share"):  # --share: a part of each test's jobs
+        first_job, stop_job = meta["jobs"]
+        page += (f"Share {meta['share'][0]}/{meta['share'][1]} of the protocol: {jobs_text(first_job, stop_job)} of "
+                 f"each test's {meta['protocol_jobs']}, {meta['episodes_per_test']} of its "
+                 f"{meta['protocol_episodes_per_test']} episodes; `crossway evaluate merge` joins the shares.\n\n")
+    if meta.get("merged_from"):
+        page += "Joined from runs over other jobs of each test:\n\n"
+        for part in meta["merged_from"]:
+            ran_on = platform_line(part["platform"]).rstrip(".")
+            page += (f"- {jobs_text(*part['jobs'])}, {part['episodes_per_test']} episodes per test, "
+                     f"{part['wall_s']} s: `{part['command']}` ({ran_on[0].lower() + ran_on[1:]})\n")
+        page += "\n"
     page += markdown(scenario, table)
     cut = sum(sum(t.get("cut_by_redraw", {}).values()) for t in tests)
     if cut:  # signs redrawn during the tests (hard)
@@ -351,6 +384,110 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
         page += "staggered: every other episode. All tests pooled.\n\n" + markdown_starts(starts)
     md_path.write_text(page)
     return [json_path, csv_path, tests_csv_path, starts_csv_path, png_path, md_path]
+
+
+# what every part of one protocol must share for ``merge_runs`` to join them (meta keys)
+SAME_PROTOCOL = ("scenario", "seed", "delays_max_s", "protocol_delays_max_s", "sign_change_interval_s",
+                 "sign_change_restart", "scripted_sight", "scripted_approach_mps", "scripted_approach_signs",
+                 "scripted_brake_for_blockers", "scripted_wait_outside_zones", "scripted_break_wait_cycles",
+                 "scripted_patience_s", "scripted_blocker_patience_s", "scripted_sight_m", "scripted_sight_shift_m")
+
+
+def report_path(path: Path) -> Path:
+    """A Table I JSON, or the one ``table1-*.json`` in an output folder."""
+    path = Path(path)
+    if path.is_dir():
+        found = sorted(path.glob("table1-*.json"))
+        if len(found) != 1:
+            raise ValueError(f"{path}: expected one table1-*.json in the folder, found {len(found)}")
+        return found[0]
+    if not path.is_file():
+        raise ValueError(f"{path}: no such file or folder")
+    return path
+
+
+def jobs_text(first: int, stop: int) -> str:
+    """Jobs [first, stop) counted from 1, for people: "job 4", "jobs 4-6"."""
+    return f"job {stop}" if stop == first + 1 else f"jobs {first + 1}-{stop}"
+
+
+def jobs_of(meta: dict) -> tuple[int, int]:
+    """The jobs [first, stop) of each test that a run's report holds; runs before --share ran
+    every job of their --episodes."""
+    if "jobs" in meta:
+        return tuple(meta["jobs"])
+    return 0, math.ceil(meta["episodes_per_test"] / CHUNK_EPISODES)
+
+
+def merge_runs(paths: list[Path], out_dir: Path, command: str) -> dict:
+    """Joins Table I runs of one protocol, each over other jobs of every test (``--share``, or a
+    run of fewer --episodes and a share of more: a run's first jobs are the same episodes whatever
+    its --episodes), into the report of one run over them all; refuses parts of other protocols,
+    checkpoints or seeds, parts that overlap or leave a gap, before writing anything."""
+    parts = []
+    for path in paths:
+        json_path = report_path(path)
+        try:
+            report = json.loads(json_path.read_text())
+            meta, tests = report["meta"], report["tests"]
+        except (json.JSONDecodeError, KeyError, TypeError) as error:
+            raise ValueError(f"{json_path}: not a Table I report ({error})") from None
+        parts.append((json_path, meta, tests))
+    if len(parts) < 2:
+        raise ValueError("merge needs two or more Table I runs")
+    first_path, first, _ = parts[0]
+    for path, meta, _ in parts[1:]:
+        for key in SAME_PROTOCOL:
+            if meta.get(key) != first.get(key):
+                raise ValueError(f"{path} and {first_path} ran other protocols: {key} "
+                                 f"{meta.get(key)!r} against {first.get(key)!r}")
+        digests = (meta.get("checkpoint_sha256"), first.get("checkpoint_sha256"))
+        if None not in digests and digests[0] != digests[1]:
+            raise ValueError(f"{path} and {first_path} evaluated other checkpoints (SHA-256 {digests[0][:12]} "
+                             f"against {digests[1][:12]})")
+        if None in digests and meta.get("checkpoint") != first.get("checkpoint"):
+            raise ValueError(f"{path} and {first_path} evaluated other checkpoints: {meta.get('checkpoint')!r} "
+                             f"against {first.get('checkpoint')!r}")
+    parts.sort(key=lambda part: jobs_of(part[1]))
+    stop = 0
+    for index, (path, meta, _) in enumerate(parts):
+        first_job, stop_job = jobs_of(meta)
+        if first_job != stop:
+            what = "overlap" if first_job < stop else "leave a gap"
+            before = f"the runs before it {jobs_text(0, stop)}" if stop else "no run holds job 1"
+            raise ValueError(f"the runs {what}: {path} holds {jobs_text(first_job, stop_job)} of each test, "
+                             f"{before}")
+        full = meta["episodes_per_test"] == (stop_job - first_job) * CHUNK_EPISODES
+        if not full and index < len(parts) - 1:
+            raise ValueError(f"{path}: its last job has {meta['episodes_per_test'] % CHUNK_EPISODES} episodes, "
+                             f"not {CHUNK_EPISODES}, so it ends its protocol: it cannot precede other jobs")
+        stop = stop_job
+    by_delay: dict[float, list[dict]] = defaultdict(list)
+    for _, _, tests in parts:
+        for test in tests:
+            by_delay[test["delay_max_s"]].append(test)
+    results = merge_chunks([test for delay in first["delays_max_s"] for test in by_delay[delay]])
+    table = summarise(results)
+    episodes = sum(meta["episodes_per_test"] for _, meta, _ in parts)
+    platforms = [meta["platform"] for _, meta, _ in parts]
+    meta = {key: first.get(key) for key in SAME_PROTOCOL}
+    meta.update({
+        "checkpoint": first.get("checkpoint"),
+        "checkpoint_sha256": next((m.get("checkpoint_sha256") for _, m, _ in parts if m.get("checkpoint_sha256")),
+                                  None),
+        "episodes_per_test": episodes, "jobs": [0, stop], "protocol_jobs": stop,
+        "protocol_episodes_per_test": episodes, "share": None,
+        "workers": sum(m.get("workers", 0) for _, m, _ in parts),
+        "wall_s": round(sum(m.get("wall_s", 0.0) for _, m, _ in parts), 1),  # the parts' own, added up
+        "command": command,
+        "jobs_from_an_earlier_run": sum(m.get("jobs_from_an_earlier_run", 0) for _, m, _ in parts),
+        "platform": platforms[0],
+        "merged_from": [{"path": str(path), "command": m.get("command"), "jobs": list(jobs_of(m)),
+                         "episodes_per_test": m["episodes_per_test"], "wall_s": m.get("wall_s"),
+                         "platform": m.get("platform")} for path, m, _ in parts],
+    })
+    paths_written = write_outputs(out_dir, first["scenario"], results, table, meta)
+    return {"table": table, "paths": paths_written, "meta": meta}
 
 
 def plot_tests(path: Path, scenario: str, test_rows: list[dict]) -> Path:
@@ -381,11 +518,13 @@ def plot_tests(path: Path, scenario: str, test_rows: list[dict]) -> Path:
 
 def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
                out_dir: Path, command: str, scripted: DriverOptions | None = None,
-               sign_restart: str | None = None, sweep_up_to_s: float | None = None) -> dict:
+               sign_restart: str | None = None, sweep_up_to_s: float | None = None,
+               share: tuple[int, int] | None = None) -> dict:
     """The whole protocol in parallel workers (``scripted``: the scripted driver's options when
     ``checkpoint`` is None; ``sign_restart``: overrides the scenario's ``episodes.sign_change_restart``;
     ``sweep_up_to_s``: only the tests with delay_max up to it, each with the seeds it has in the
-    whole protocol, so that their first chunks are the whole protocol's episodes); writes JSON, CSV
+    whole protocol, so that their first chunks are the whole protocol's episodes; ``share``: (I, N),
+    only the I-th of N parts of every test's jobs, for ``merge_runs`` to join); writes JSON, CSV
     and Markdown into ``out_dir``."""
     from simcore.scenario import load_scenario
 
@@ -404,15 +543,23 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
     # a test's seed is its place in the whole protocol: a shorter sweep runs the same tests
     tests = [TestSpec(spec, d, episodes, seed + i, checkpoint, scripted)
              for i, d in enumerate(schedule) if sweep_up_to_s is None or d <= sweep_up_to_s]
-    chunks = [chunk for t in tests for chunk in chunks_of(t)]
+    jobs_per_test = len(chunks_of(tests[0]))
+    first, stop = share_range(share, jobs_per_test) if share is not None else (0, jobs_per_test)
+    chunks = [chunk for t in tests for chunk in chunks_of(t)[first:stop]]
+    run_episodes = sum(c.episodes for c in chunks_of(tests[0])[first:stop])  # per test
     started = time.monotonic()
     kept, salt, jobs = partial_dir(out_dir, f"table1-{spec.name}"), cache_salt(checkpoint), [(c,) for c in chunks]
     resumed = kept_jobs(run_test, jobs, kept, salt)  # finished chunks of an earlier run, stopped
-    parts = run_parallel(run_test, jobs, episodes * len(tests), workers, f"table1 {spec.name}",
+    parts = run_parallel(run_test, jobs, run_episodes * len(tests), workers, f"table1 {spec.name}",
                          cache_dir=kept, salt=salt, sizes=[c.episodes for c in chunks])
     results = merge_chunks(parts)
     table = summarise(results)
-    meta = {"scenario": spec.name, "checkpoint": checkpoint, "episodes_per_test": episodes,
+    meta = {"scenario": spec.name, "checkpoint": checkpoint, "checkpoint_sha256": file_digest(checkpoint) or None,
+            "episodes_per_test": run_episodes,
+            # the jobs [first, stop) of each test's protocol_jobs (of CHUNK_EPISODES episodes each,
+            # seeds: the test's + 1000 per job) that ran; all of them unless --share
+            "jobs": [first, stop], "protocol_jobs": jobs_per_test, "protocol_episodes_per_test": episodes,
+            "share": list(share) if share is not None else None,
             "delays_max_s": [t.delay_max_s for t in tests], "seed": seed, "workers": workers,
             # the whole protocol's tests; delays_max_s is fewer where --sweep-up-to cut the sweep
             "protocol_delays_max_s": schedule,

@@ -616,3 +616,60 @@ def test_a_kept_result_that_does_not_read_is_run_again(tmp_path, capfd):
     # the rerun's result replaced the broken one: a third run takes it without driving
     again = run_parallel(run_test, [job], 2, 1, "table1 easy", cache_dir=kept, salt=salt, sizes=[2])
     assert again == results and "1 of 1 jobs already done" in capfd.readouterr().err
+
+
+def _report(folder: Path) -> dict:
+    return json.loads((folder / "table1-hard.json").read_text())
+
+
+def test_table1_shares_merge_into_the_whole_protocol(tmp_path):
+    """--share I/N runs the I-th of N parts of every test's 500-episode jobs with their protocol
+    seeds; 'evaluate merge' joins parts into the very report one run over all the jobs writes. A
+    run of fewer --episodes, from before --share (no 'jobs' record), is the protocol's first jobs."""
+    common = ("evaluate", "table1", "--scripted", "--scenario", "hard", "--sweep-up-to", "10", "--workers", "2")
+    first = crossway(*common, "--episodes", "500", "--out", str(tmp_path / "first"))
+    second = crossway(*common, "--episodes", "1000", "--share", "2/2", "--out", str(tmp_path / "second"))
+    whole = crossway(*common, "--episodes", "1000", "--out", str(tmp_path / "whole"))
+    assert first.returncode == second.returncode == whole.returncode == 0, first.stderr + second.stderr + whole.stderr
+    meta = _report(tmp_path / "second")["meta"]
+    assert (meta["jobs"], meta["protocol_jobs"], meta["episodes_per_test"], meta["share"]) == ([1, 2], 2, 500, [2, 2])
+    assert "Share 2/2 of the protocol: job 2 of each test's 2" in (tmp_path / "second" / "table1-hard.md").read_text()
+    old = _report(tmp_path / "first")  # as a report written before --share was
+    for key in ("jobs", "protocol_jobs", "protocol_episodes_per_test", "share", "checkpoint_sha256"):
+        del old["meta"][key]
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "table1-hard.json").write_text(json.dumps(old))
+
+    joined = crossway("evaluate", "merge", str(tmp_path / "second"), str(tmp_path / "old"), "--out", str(tmp_path / "joined"))
+    assert joined.returncode == 0, joined.stderr
+    assert "joined 2 runs, 1000 episodes per test" in joined.stdout
+    merged, reference = _report(tmp_path / "joined"), _report(tmp_path / "whole")
+    for key in ("counts", "counts_by_start", "counts_uncuttable", "cut_by_redraw"):
+        assert merged["tests"][0][key] == reference["tests"][0][key]
+    assert merged["table"]["stop"]["goal"] == reference["table"]["stop"]["goal"]
+    assert merged["table"]["stop"]["speed_mps"] == pytest.approx(reference["table"]["stop"]["speed_mps"])
+    assert merged["by_start"] == reference["by_start"]
+    assert merged["meta"]["jobs"] == [0, 2] and [p["jobs"] for p in merged["meta"]["merged_from"]] == [[0, 1], [1, 2]]
+    page = (tmp_path / "joined" / "table1-hard.md").read_text()
+    assert "Joined from runs over other jobs of each test" in page and "--share 2/2" in page
+
+    def refused(*runs):
+        out = tmp_path / f"refused{len(list(tmp_path.iterdir()))}"
+        result = crossway("evaluate", "merge", *map(str, runs), "--out", str(out))
+        assert result.returncode != 0 and not out.exists()
+        return result.stderr
+
+    assert "overlap" in refused(tmp_path / "second", tmp_path / "whole")
+    assert "leave a gap" in refused(tmp_path / "second", tmp_path / "second" / "table1-hard.json")
+    assert "two or more" in refused(tmp_path / "second")
+    other_seed = _report(tmp_path / "second")
+    other_seed["meta"]["seed"] = 7
+    (tmp_path / "other-seed.json").write_text(json.dumps(other_seed))
+    assert "seed 7 against 0" in refused(tmp_path / "first", tmp_path / "other-seed.json")
+    assert "no such file" in refused(tmp_path / "first", tmp_path / "missing")
+    for name, digest in (("first", "a" * 64), ("second", "b" * 64)):  # as if of two checkpoints
+        report = _report(tmp_path / name)
+        report["meta"]["checkpoint_sha256"] = digest
+        (tmp_path / f"{name}-digest.json").write_text(json.dumps(report))
+    assert "other checkpoints (SHA-256 bbbbbbbbbbbb against aaaaaaaaaaaa)" in \
+        refused(tmp_path / "first-digest.json", tmp_path / "second-digest.json")

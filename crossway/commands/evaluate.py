@@ -40,7 +40,25 @@ def add_parser(subparsers) -> None:
                              "policies lose most): a screen, each test with the seeds it has in the whole "
                              "protocol, so with half the --episodes it is the first half of those tests' "
                              "episodes. Default: the whole sweep")
+    table1.add_argument("--share", default=None, metavar="I/N",
+                        help="run only the I-th of N shares of every test's jobs (of 500 episodes each, "
+                             "with the seeds they have in the whole protocol), e.g. 1/3, 2/3 and 3/3 on three "
+                             "machines; 'crossway evaluate merge' then joins the N output folders into the "
+                             "whole protocol's table. Default: every job")
     table1.set_defaults(func=run_table1_command)
+
+    merge = experiments.add_parser(
+        "merge", help="join Table I runs over other jobs of each test (--share) into one table",
+        description="Join the output folders (or table1-*.json reports) of Table I runs of one protocol that "
+                    "ran other jobs of every test, e.g. 'table1 --share 1/2' and '--share 2/2' on two machines, "
+                    "into the report one run over all their jobs would have written: the same JSON, CSV, "
+                    "Markdown and picture. A run of fewer --episodes counts as the first jobs of the protocol "
+                    "(its episodes are the first ones of each test). Refuses runs of other scenarios, seeds, "
+                    "sign restarts or checkpoints (by SHA-256 where both reports have it), and runs that "
+                    "overlap or leave a gap, before writing anything.", formatter_class=fmt)
+    merge.add_argument("runs", nargs="+", type=Path, metavar="RUN", help="output folder or table1-*.json of a run")
+    merge.add_argument("--out", type=Path, required=True, help="output directory for the joined report")
+    merge.set_defaults(func=run_merge_command)
 
     rules = experiments.add_parser(
         "right-of-way", help="Table II: episodes without right-of-way infractions",
@@ -201,14 +219,26 @@ def _checked(args) -> str | None:
 
 
 def run_table1_command(args) -> int:
-    from evaluation.table1 import markdown, run_table1
+    from evaluation.table1 import markdown, parse_share, run_table1
 
     checkpoint = _checked(args)
+    share = parse_share(args.share) if args.share is not None else None
     report = run_table1(args.scenario, checkpoint, args.episodes, args.workers, args.seed, args.out,
                         _command_line(), **_scripted_options(args, checkpoint), sign_restart=args.sign_restart,
-                        sweep_up_to_s=args.sweep_up_to)
+                        sweep_up_to_s=args.sweep_up_to, share=share)
     print(markdown(report["meta"]["scenario"], report["table"]), end="")
     print("wrote " + ", ".join(str(p) for p in report["paths"]) + f" in {report['meta']['wall_s']} s")
+    return 0
+
+
+def run_merge_command(args) -> int:
+    from evaluation.table1 import markdown, merge_runs
+
+    report = merge_runs(args.runs, args.out, _command_line())
+    meta = report["meta"]
+    print(markdown(meta["scenario"], report["table"]), end="")
+    print(f"joined {len(meta['merged_from'])} runs, {meta['episodes_per_test']} episodes per test; wrote "
+          + ", ".join(str(p) for p in report["paths"]))
     return 0
 
 
