@@ -386,6 +386,44 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
     return [json_path, csv_path, tests_csv_path, starts_csv_path, png_path, md_path]
 
 
+def peek(out_dir: Path) -> str:
+    """What a Table I run still going (or stopped) into ``out_dir`` has finished so far: its kept
+    jobs (``--out/.partial``) per test and sign, and their average over the tests begun: a look
+    at a long run before it ends, not its result (the densest tests may not have begun)."""
+    import pickle
+
+    from evaluation.parallel import PARTIAL_DIR
+
+    folders = sorted((Path(out_dir) / PARTIAL_DIR).glob("table1-*"))
+    if not folders:
+        raise ValueError(f"{out_dir}: no Table I run in progress there (no {PARTIAL_DIR}/table1-*: "
+                         "none began, or it has finished and written its outputs)")
+    page = ""
+    for folder in folders:
+        parts = []
+        for path in sorted(folder.glob("*.pkl")):
+            try:
+                parts.append(pickle.loads(path.read_bytes()))
+            except Exception:  # noqa: BLE001 - being written, or unreadable: the run will redo it
+                continue
+        jobs = Counter(part["delay_max_s"] for part in parts)
+        page += f"## {folder.name}: {len(parts)} job{'s' * (len(parts) != 1)} finished\n\n"
+        if not parts:
+            continue
+        tests = sorted(merge_chunks(parts), key=lambda test: test["delay_max_s"])
+        page += ("Jobs finished per test: " + ", ".join(f"{d:g} s: {jobs[d]}" for d in sorted(jobs)) + "\n\n"
+                 + markdown_tests(per_test_rows(tests)) + "\nAveraged over these tests so far:\n\n")
+        table = summarise(tests)
+        page += "| | " + " | ".join(SIGNS) + " |\n|---|" + "---|" * len(SIGNS) + "\n"
+        for key in (*OUTCOMES, "goal_stderr", "episodes"):
+            cells = (("{:.3f}" if key != "episodes" else "{}").format(table[s][key]) if s in table else "-"
+                     for s in SIGNS)
+            name = COLUMN_NAMES.get(key, {"goal_stderr": "Reaches, standard error", "episodes": "Episodes"}.get(key))
+            page += f"| {name} | " + " | ".join(cells) + " |\n"
+        page += "\n"
+    return page
+
+
 # what every part of one protocol must share for ``merge_runs`` to join them (meta keys)
 SAME_PROTOCOL = ("scenario", "seed", "delays_max_s", "protocol_delays_max_s", "sign_change_interval_s",
                  "sign_change_restart", "scripted_sight", "scripted_approach_mps", "scripted_approach_signs",

@@ -673,3 +673,30 @@ def test_table1_shares_merge_into_the_whole_protocol(tmp_path):
         (tmp_path / f"{name}-digest.json").write_text(json.dumps(report))
     assert "other checkpoints (SHA-256 bbbbbbbbbbbb against aaaaaaaaaaaa)" in \
         refused(tmp_path / "first-digest.json", tmp_path / "second-digest.json")
+
+
+def test_peek_reads_the_finished_jobs_of_a_run_still_going(tmp_path):
+    """evaluate peek prints what a Table I run has finished so far (its kept jobs), while it runs."""
+    import signal
+    import time
+
+    out = tmp_path / "run"
+    running = subprocess.Popen([sys.executable, "-m", "crossway", "evaluate", "table1", "--scripted", "--scenario",
+                                "hard", "--sweep-up-to", "20", "--episodes", "1000", "--workers", "1", "--out", str(out)],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 240
+        while not list((out / ".partial" / "table1-hard").glob("*.pkl")) and time.monotonic() < deadline:
+            time.sleep(0.5)
+        seen = crossway("evaluate", "peek", str(out))
+        assert running.poll() is None, "the run ended before a look at it"
+    finally:
+        running.send_signal(signal.SIGTERM)
+        running.wait(timeout=60)
+    assert seen.returncode == 0, seen.stderr
+    assert "## table1-hard: 1 job finished" in seen.stdout
+    assert "Jobs finished per test: 10 s: 1" in seen.stdout  # one worker: the first job first
+    assert "(500) |\n" in seen.stdout  # the first job's 500 episodes, all signs
+    assert "| Reaches, standard error |" in seen.stdout
+    nothing = crossway("evaluate", "peek", str(tmp_path / "none"))
+    assert nothing.returncode != 0 and "no Table I run in progress" in nothing.stderr

@@ -60,6 +60,16 @@ def add_parser(subparsers) -> None:
     merge.add_argument("--out", type=Path, required=True, help="output directory for the joined report")
     merge.set_defaults(func=run_merge_command)
 
+    peek = experiments.add_parser(
+        "peek", help="the finished jobs of a Table I run still going (or stopped), per test and sign",
+        description="Read the jobs a Table I run into --out has finished so far (kept in --out/.partial until "
+                    "it writes its outputs) and print their reaches and crashes per test and sign, and their "
+                    "average over the tests begun: a look at a run of hours before it ends, e.g. to stop a "
+                    "policy that is clearly short. Reads files only; the run goes on undisturbed.",
+        formatter_class=fmt)
+    peek.add_argument("out", type=Path, metavar="OUT", help="the --out folder of the running table1 command")
+    peek.set_defaults(func=run_peek_command)
+
     rules = experiments.add_parser(
         "right-of-way", help="Table II: episodes without right-of-way infractions",
         description="The paper's right-of-way test: every lane starts at once with a random route and sign, all "
@@ -239,6 +249,13 @@ def run_merge_command(args) -> int:
     print(markdown(meta["scenario"], report["table"]), end="")
     print(f"joined {len(meta['merged_from'])} runs, {meta['episodes_per_test']} episodes per test; wrote "
           + ", ".join(str(p) for p in report["paths"]))
+    return 0
+
+
+def run_peek_command(args) -> int:
+    from evaluation.table1 import peek
+
+    print(peek(args.out), end="")
     return 0
 
 
