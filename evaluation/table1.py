@@ -426,9 +426,7 @@ def peek(out_dir: Path) -> str:
 
 # what every part of one protocol must share for ``merge_runs`` to join them (meta keys)
 SAME_PROTOCOL = ("scenario", "seed", "delays_max_s", "protocol_delays_max_s", "sign_change_interval_s",
-                 "sign_change_restart", "scripted_sight", "scripted_approach_mps", "scripted_approach_signs",
-                 "scripted_brake_for_blockers", "scripted_wait_outside_zones", "scripted_break_wait_cycles",
-                 "scripted_patience_s", "scripted_blocker_patience_s", "scripted_sight_m", "scripted_sight_shift_m")
+                 "sign_change_restart", *DriverOptions().record(), "scripted_sight_m", "scripted_sight_shift_m")
 
 
 def report_path(path: Path) -> Path:
@@ -507,7 +505,7 @@ def merge_runs(paths: list[Path], out_dir: Path, command: str) -> dict:
     results = merge_chunks([test for delay in first["delays_max_s"] for test in by_delay[delay]])
     table = summarise(results)
     episodes = sum(meta["episodes_per_test"] for _, meta, _ in parts)
-    platforms = [meta["platform"] for _, meta, _ in parts]
+    last_protocol_jobs = parts[-1][1].get("protocol_jobs", stop)  # runs before --share end their own protocol
     meta = {key: first.get(key) for key in SAME_PROTOCOL}
     meta.update({
         "checkpoint": first.get("checkpoint"),
@@ -519,7 +517,9 @@ def merge_runs(paths: list[Path], out_dir: Path, command: str) -> dict:
         "wall_s": round(sum(m.get("wall_s", 0.0) for _, m, _ in parts), 1),  # the parts' own, added up
         "command": command,
         "jobs_from_an_earlier_run": sum(m.get("jobs_from_an_earlier_run", 0) for _, m, _ in parts),
-        "platform": platforms[0],
+        "platform": first["platform"],
+        # jobs of the parts' protocol that no part ran (a share left out): the report is then a shorter run
+        "jobs_not_joined": max(0, last_protocol_jobs - stop),
         "merged_from": [{"path": str(path), "command": m.get("command"), "jobs": list(jobs_of(m)),
                          "episodes_per_test": m["episodes_per_test"], "wall_s": m.get("wall_s"),
                          "platform": m.get("platform")} for path, m, _ in parts],

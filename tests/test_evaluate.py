@@ -652,6 +652,7 @@ def test_table1_shares_merge_into_the_whole_protocol(tmp_path):
     assert merged["meta"]["jobs"] == [0, 2] and [p["jobs"] for p in merged["meta"]["merged_from"]] == [[0, 1], [1, 2]]
     page = (tmp_path / "joined" / "table1-hard.md").read_text()
     assert "Joined from runs over other jobs of each test" in page and "--share 2/2" in page
+    assert merged["meta"]["jobs_not_joined"] == 0 and "note:" not in joined.stderr
 
     def refused(*runs):
         out = tmp_path / f"refused{len(list(tmp_path.iterdir()))}"

@@ -249,6 +249,10 @@ def run_merge_command(args) -> int:
     print(markdown(meta["scenario"], report["table"]), end="")
     print(f"joined {len(meta['merged_from'])} runs, {meta['episodes_per_test']} episodes per test; wrote "
           + ", ".join(str(p) for p in report["paths"]))
+    if meta["jobs_not_joined"]:
+        print(f"note: the shares' protocol has {meta['jobs_not_joined']} more job(s) per test that no run given "
+              f"holds; the report is of the first {meta['jobs'][1]} jobs, {meta['episodes_per_test']} episodes "
+              "per test", file=sys.stderr)
     return 0
 
 
