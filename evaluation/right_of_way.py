@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from evaluation.shares import jobs_text
 from simcore.controller import DriverOptions
 from simcore.dynamics import DT, MAX_ACCELERATION, VEHICLE_LENGTH
 from simcore.rewards import END_REASON_NAMES, EndReason
@@ -219,14 +220,16 @@ def chunk_sizes(episodes: int) -> list[int]:
 
 
 def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, workers: int, seed: int,
-                     out_dir, command: str, scripted: DriverOptions | None = None) -> dict:
-    """The whole test in parallel workers; writes JSON, CSV and Markdown into ``out_dir``."""
-    import json
+                     out_dir, command: str, scripted: DriverOptions | None = None,
+                     share: tuple[int, int] | None = None) -> dict:
+    """The whole test in parallel workers (``share``: (I, N), only the I-th of N parts of its jobs,
+    for ``merge_runs`` to join); writes JSON, CSV and Markdown into ``out_dir``."""
     import time
     from pathlib import Path
 
-    from evaluation.parallel import (cache_salt, clear_partial, kept_jobs, numeric_platform, partial_dir,
-                                     platform_line, run_parallel)
+    from evaluation.parallel import (cache_salt, clear_partial, file_digest, kept_jobs, numeric_platform,
+                                     partial_dir, run_parallel)
+    from evaluation.shares import share_range
     from simcore.scenario import load_scenario
 
     spec = load_scenario(scenario)
@@ -236,47 +239,67 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
         check_checkpoint(checkpoint, spec)
     # jobs of at most CHUNK_EPISODES episodes, each with its own simulator and seed: the numbers do
     # not depend on --workers, and a rerun after a stop takes the chunks that had finished
-    shares = chunk_sizes(episodes)
-    workers = max(1, min(workers, len(shares)))
-    started = time.monotonic()
+    sizes = chunk_sizes(episodes)
+    first, stop = share_range(share, len(sizes), f"job(s) of at most {CHUNK_EPISODES} episodes")
     scripted = scripted or DriverOptions()
-    jobs = [(spec, checkpoint, n, seed + 1000 * i, scripted)
-            for i, n in enumerate(shares)]
+    jobs = [(spec, checkpoint, n, seed + 1000 * i, scripted) for i, n in enumerate(sizes)][first:stop]
+    workers = max(1, min(workers, len(jobs)))
+    started = time.monotonic()
     kept, salt = partial_dir(Path(out_dir), f"right-of-way-{spec.name}"), cache_salt(checkpoint)
     resumed = kept_jobs(run_episodes, jobs, kept, salt)
-    parts = run_parallel(run_episodes, jobs, episodes, workers, f"right-of-way {spec.name}", cache_dir=kept,
-                         salt=salt, sizes=shares)
-    clean = sum(p["no_infraction"] for p in parts)
-    clean_of_seen = sum(p["no_seen_infraction"] for p in parts)
-    infractions = sum(sum(p["infractions_per_episode"]) for p in parts)
+    ran = sum(sizes[first:stop])
+    parts = run_parallel(run_episodes, jobs, ran, workers, f"right-of-way {spec.name}", cache_dir=kept,
+                         salt=salt, sizes=sizes[first:stop])
     end_reasons: dict[str, int] = {}
     for part in parts:
         for reason, count in part["end_reasons"].items():
             end_reasons[reason] = end_reasons.get(reason, 0) + count
-    rate = clean / episodes
-    summary = {"scenario": spec.name, "episodes": episodes, "no_infraction": rate,
+    counts = {"episodes": ran,
+              "no_infraction_episodes": sum(p["no_infraction"] for p in parts),
+              "no_seen_infraction_episodes": sum(p["no_seen_infraction"] for p in parts),
+              "infractions": sum(sum(p["infractions_per_episode"]) for p in parts),
+              "infractions_seen_in_time": sum(p["anatomy"]["seen_in_time"] for p in parts),
+              "infractions_offender_crashed": sum(p["anatomy"]["offender_crashed"] for p in parts),
+              "agent_end_reasons": end_reasons}
+    meta = {"scenario": spec.name, "view_extent_m": spec.views.extent_m, "view_shift_m": spec.views.shift_m,
+            "checkpoint": checkpoint, "checkpoint_sha256": file_digest(checkpoint) or None,
+            **(scripted.record() if checkpoint is None else dict.fromkeys(scripted.record())),
+            "seed": seed, "workers": workers, "episodes_per_job": CHUNK_EPISODES,
+            # the jobs [first, stop) of the protocol's protocol_jobs (seeds: --seed + 1000 per job) that
+            # ran; all of them unless --share
+            "jobs": [first, stop], "protocol_jobs": len(sizes), "protocol_episodes": episodes,
+            "share": list(share) if share is not None else None,
+            "wall_s": round(time.monotonic() - started, 1), "command": command,
+            "jobs_from_an_earlier_run": resumed, "platform": numeric_platform()}
+    summary = write_outputs(Path(out_dir), counts, meta)
+    clear_partial(kept)
+    return summary
+
+
+def write_outputs(out_dir, counts: dict, meta: dict) -> dict:
+    """The test's JSON (``counts`` and ``meta`` in one flat record, with the rates), CSV and
+    Markdown from its counts; returns the record with the table and the paths written."""
+    import json
+
+    from evaluation.parallel import platform_line
+
+    episodes, scenario = counts["episodes"], meta["scenario"]
+    rate = counts["no_infraction_episodes"] / episodes
+    paper = PAPER_TABLE2.get(scenario)
+    summary = {"scenario": scenario, "episodes": episodes, "no_infraction": rate,
                "infraction": 1.0 - rate, "no_infraction_stderr": (rate * (1.0 - rate) / episodes) ** 0.5,
-               "paper_no_infraction": PAPER_TABLE2.get(spec.name),
+               "paper_no_infraction": paper,
                # the same test excusing infractions against a car the offender could not see in time
-               "no_seen_infraction": clean_of_seen / episodes,
-               "infractions": infractions,
-               "infractions_seen_in_time": sum(p["anatomy"]["seen_in_time"] for p in parts),
-               "infractions_offender_crashed": sum(p["anatomy"]["offender_crashed"] for p in parts),
-               "view_extent_m": spec.views.extent_m, "view_shift_m": spec.views.shift_m,
-               "agent_end_reasons": end_reasons, "checkpoint": checkpoint,
-               **(scripted.record() if checkpoint is None else dict.fromkeys(scripted.record())),
-               "seed": seed, "workers": workers, "episodes_per_job": CHUNK_EPISODES,
-               "wall_s": round(time.monotonic() - started, 1), "command": command,
-               "jobs_from_an_earlier_run": resumed, "platform": numeric_platform()}
-    out_dir = Path(out_dir)
+               "no_seen_infraction": counts["no_seen_infraction_episodes"] / episodes,
+               **counts, **meta}
     out_dir.mkdir(parents=True, exist_ok=True)
-    stem = out_dir / f"right-of-way-{spec.name}"
+    stem = out_dir / f"right-of-way-{scenario}"
     stem.with_suffix(".json").write_text(json.dumps(summary, indent=2))
-    paper = PAPER_TABLE2.get(spec.name)
+    infractions = summary["infractions"]
     stem.with_suffix(".csv").write_text(
         "scenario,episodes,no_infraction,infraction,no_infraction_stderr,paper_no_infraction,no_seen_infraction,"
         "infractions,infractions_seen_in_time,infractions_offender_crashed\n"
-        f"{spec.name},{episodes},{summary['no_infraction']:.4f},{summary['infraction']:.4f},"
+        f"{scenario},{episodes},{summary['no_infraction']:.4f},{summary['infraction']:.4f},"
         f"{summary['no_infraction_stderr']:.4f},{'' if paper is None else paper},{summary['no_seen_infraction']:.4f},"
         f"{infractions},{summary['infractions_seen_in_time']},{summary['infractions_offender_crashed']}\n")
     table = ("| | ours | paper |\n|---|---|---|\n"
@@ -287,9 +310,78 @@ def run_right_of_way(scenario: str, checkpoint: str | None, episodes: int, worke
              f"| Infractions (all episodes): seen in time / offender crashed / all | "
              f"{summary['infractions_seen_in_time']} / {summary['infractions_offender_crashed']} / {infractions}"
              " | - |\n")
-    stem.with_suffix(".md").write_text(f"# Right-of-way test (Table II), {spec.name}\n\n{command}\n\n"
-                                       f"{platform_line(summary['platform'])}\n\n{table}")
-    clear_partial(kept)
+    page = f"# Right-of-way test (Table II), {scenario}\n\n{meta['command']}\n\n{platform_line(meta['platform'])}\n\n"
+    if meta.get("share"):
+        page += (f"Share {meta['share'][0]}/{meta['share'][1]} of the test: {jobs_text(*meta['jobs'])} of its "
+                 f"{meta['protocol_jobs']}, {episodes} of its {meta['protocol_episodes']} episodes; "
+                 "`crossway evaluate merge` joins the shares.\n\n")
+    if meta.get("merged_from"):
+        page += "Joined from runs over other jobs of the test:\n\n" + merged_from_lines(meta["merged_from"]) + "\n"
+    stem.with_suffix(".md").write_text(page + table)
     summary["markdown"] = table
     summary["paths"] = [str(stem.with_suffix(x)) for x in (".json", ".csv", ".md")]
     return summary
+
+
+def merged_from_lines(parts: list[dict]) -> str:
+    """The parts of a joined report, one Markdown list item each: jobs, size, time, command, machine."""
+    from evaluation.parallel import platform_line
+
+    lines = ""
+    for part in parts:
+        ran_on = platform_line(part["platform"]).rstrip(".") if part.get("platform") else "machine not recorded"
+        lines += (f"- {jobs_text(*part['jobs'])}, {part['episodes']} episodes, {part['wall_s']} s: "
+                  f"`{part['command']}` ({ran_on[0].lower() + ran_on[1:]})\n")
+    return lines
+
+
+# what every part of one test must share for ``merge_runs`` to join them
+SAME_PROTOCOL = ("scenario", "seed", "episodes_per_job", "view_extent_m", "view_shift_m", *DriverOptions().record())
+COUNTS = ("infractions", "infractions_seen_in_time", "infractions_offender_crashed")
+
+
+def jobs_of(record: dict) -> tuple[int, int]:
+    """The jobs [first, stop) a report holds; runs before --share ran every job of their --episodes."""
+    if "jobs" in record:
+        return tuple(record["jobs"])
+    return 0, len(chunk_sizes(record["episodes"]))
+
+
+def merge_runs(reports: list, out_dir, command: str) -> dict:
+    """Joins right-of-way runs of one test over other jobs (``--share``, or a run of fewer
+    --episodes: its jobs are the first ones) into the report one run over them all writes;
+    refuses runs of other tests, seeds or checkpoints, and runs that overlap or leave a gap, before
+    writing anything. ``reports``: (path, parsed JSON) per run."""
+    from pathlib import Path
+
+    from evaluation.shares import check_contiguous, check_same_protocol, merged_meta
+
+    for path, record in reports:
+        if not all(key in record for key in ("episodes", "no_infraction", *COUNTS)):
+            raise ValueError(f"{path}: not a right-of-way report")
+    check_same_protocol(reports, SAME_PROTOCOL)
+    parts = sorted(reports, key=lambda part: jobs_of(part[1]))
+    stop = check_contiguous([(path, jobs_of(r), r["episodes"] % r.get("episodes_per_job", CHUNK_EPISODES) != 0)
+                             for path, r in parts])
+    counts = {"episodes": sum(r["episodes"] for _, r in parts),
+              # reports before session 38 hold rates alone: rate x episodes is the count they came from
+              "no_infraction_episodes": sum(r.get("no_infraction_episodes", round(r["no_infraction"] * r["episodes"]))
+                                            for _, r in parts),
+              "no_seen_infraction_episodes": sum(r.get("no_seen_infraction_episodes",
+                                                       round(r["no_seen_infraction"] * r["episodes"]))
+                                                 for _, r in parts),
+              **{key: sum(r[key] for _, r in parts) for key in COUNTS}}
+    reasons: dict[str, int] = {}
+    for _, r in parts:
+        for reason, count in r.get("agent_end_reasons", {}).items():
+            reasons[reason] = reasons.get(reason, 0) + count
+    counts["agent_end_reasons"] = reasons
+    meta = merged_meta(parts, SAME_PROTOCOL, command)
+    last_protocol_jobs = parts[-1][1].get("protocol_jobs", stop)
+    meta.update({"jobs": [0, stop], "protocol_jobs": stop, "protocol_episodes": counts["episodes"],
+                 "jobs_not_joined": max(0, last_protocol_jobs - stop),
+                 "merged_from": [{"path": str(path), "command": r.get("command"), "jobs": list(jobs_of(r)),
+                                  "episodes": r["episodes"], "wall_s": r.get("wall_s"), "platform": r.get("platform")}
+                                 for path, r in parts]})
+    summary = write_outputs(Path(out_dir), counts, meta)
+    return {"summary": summary, "paths": summary["paths"], "meta": meta}

@@ -22,6 +22,7 @@ import numpy as np
 
 from evaluation.parallel import (cache_salt, clear_partial, file_digest, kept_jobs, numeric_platform, partial_dir,
                                  platform_line, run_parallel)
+from evaluation.shares import check_contiguous, check_same_protocol, jobs_text, merged_meta, share_range
 from simcore.controller import DriverOptions
 from simcore.dynamics import DT
 
@@ -81,27 +82,6 @@ def chunks_of(test: TestSpec) -> list[TestSpec]:
     return [replace(test, episodes=min(CHUNK_EPISODES, test.episodes - start),
                     seed=test.seed + 1000 * (start // CHUNK_EPISODES))
             for start in range(0, test.episodes, CHUNK_EPISODES)]
-
-
-def parse_share(text: str) -> tuple[int, int]:
-    """``"I/N"`` -> (I, N): the I-th of N shares of every test's jobs (``share_range``)."""
-    try:
-        index, count = (int(x) for x in text.split("/"))
-    except ValueError:
-        raise ValueError(f"--share takes I/N, e.g. 2/3 (the second of three shares); got {text!r}") from None
-    if not 1 <= index <= count:
-        raise ValueError(f"--share I/N needs 1 <= I <= N; got {text!r}")
-    return index, count
-
-
-def share_range(share: tuple[int, int], jobs: int) -> tuple[int, int]:
-    """The jobs [first, stop) of a test of ``jobs`` jobs that share (I, N) runs: the I-th of N runs
-    of the protocol, each on its own machine, that together run every job once."""
-    index, count = share
-    if count > jobs:
-        raise ValueError(f"--share {index}/{count}: each test has only {jobs} job(s) of at most "
-                         f"{CHUNK_EPISODES} episodes to share out; use N <= {jobs}")
-    return (index - 1) * jobs // count, index * jobs // count
 
 
 def start_test(spec: TestSpec):
@@ -429,24 +409,6 @@ SAME_PROTOCOL = ("scenario", "seed", "delays_max_s", "protocol_delays_max_s", "s
                  "sign_change_restart", *DriverOptions().record(), "scripted_sight_m", "scripted_sight_shift_m")
 
 
-def report_path(path: Path) -> Path:
-    """A Table I JSON, or the one ``table1-*.json`` in an output folder."""
-    path = Path(path)
-    if path.is_dir():
-        found = sorted(path.glob("table1-*.json"))
-        if len(found) != 1:
-            raise ValueError(f"{path}: expected one table1-*.json in the folder, found {len(found)}")
-        return found[0]
-    if not path.is_file():
-        raise ValueError(f"{path}: no such file or folder")
-    return path
-
-
-def jobs_text(first: int, stop: int) -> str:
-    """Jobs [first, stop) counted from 1, for people: "job 4", "jobs 4-6"."""
-    return f"job {stop}" if stop == first + 1 else f"jobs {first + 1}-{stop}"
-
-
 def jobs_of(meta: dict) -> tuple[int, int]:
     """The jobs [first, stop) of each test that a run's report holds; runs before --share ran
     every job of their --episodes."""
@@ -455,49 +417,26 @@ def jobs_of(meta: dict) -> tuple[int, int]:
     return 0, math.ceil(meta["episodes_per_test"] / CHUNK_EPISODES)
 
 
-def merge_runs(paths: list[Path], out_dir: Path, command: str) -> dict:
+def merge_runs(reports: list[tuple[Path, dict]], out_dir: Path, command: str) -> dict:
     """Joins Table I runs of one protocol, each over other jobs of every test (``--share``, or a
     run of fewer --episodes and a share of more: a run's first jobs are the same episodes whatever
     its --episodes), into the report of one run over them all; refuses parts of other protocols,
-    checkpoints or seeds, parts that overlap or leave a gap, before writing anything."""
+    checkpoints or seeds, parts that overlap or leave a gap, before writing anything.
+    ``reports``: (path, its parsed JSON) per part (``evaluation.shares.merge_reports``)."""
     parts = []
-    for path in paths:
-        json_path = report_path(path)
+    for json_path, report in reports:
         try:
-            report = json.loads(json_path.read_text())
             meta, tests = report["meta"], report["tests"]
-        except (json.JSONDecodeError, KeyError, TypeError) as error:
-            raise ValueError(f"{json_path}: not a Table I report ({error})") from None
+            meta["episodes_per_test"]
+        except (KeyError, TypeError) as error:
+            raise ValueError(f"{json_path}: not a Table I report (no {error})") from None
         parts.append((json_path, meta, tests))
-    if len(parts) < 2:
-        raise ValueError("merge needs two or more Table I runs")
-    first_path, first, _ = parts[0]
-    for path, meta, _ in parts[1:]:
-        for key in SAME_PROTOCOL:
-            if meta.get(key) != first.get(key):
-                raise ValueError(f"{path} and {first_path} ran other protocols: {key} "
-                                 f"{meta.get(key)!r} against {first.get(key)!r}")
-        digests = (meta.get("checkpoint_sha256"), first.get("checkpoint_sha256"))
-        if None not in digests and digests[0] != digests[1]:
-            raise ValueError(f"{path} and {first_path} evaluated other checkpoints (SHA-256 {digests[0][:12]} "
-                             f"against {digests[1][:12]})")
-        if None in digests and meta.get("checkpoint") != first.get("checkpoint"):
-            raise ValueError(f"{path} and {first_path} evaluated other checkpoints: {meta.get('checkpoint')!r} "
-                             f"against {first.get('checkpoint')!r}")
+    check_same_protocol([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL)
     parts.sort(key=lambda part: jobs_of(part[1]))
-    stop = 0
-    for index, (path, meta, _) in enumerate(parts):
-        first_job, stop_job = jobs_of(meta)
-        if first_job != stop:
-            what = "overlap" if first_job < stop else "leave a gap"
-            before = f"the runs before it {jobs_text(0, stop)}" if stop else "no run holds job 1"
-            raise ValueError(f"the runs {what}: {path} holds {jobs_text(first_job, stop_job)} of each test, "
-                             f"{before}")
-        full = meta["episodes_per_test"] == (stop_job - first_job) * CHUNK_EPISODES
-        if not full and index < len(parts) - 1:
-            raise ValueError(f"{path}: its last job has {meta['episodes_per_test'] % CHUNK_EPISODES} episodes, "
-                             f"not {CHUNK_EPISODES}, so it ends its protocol: it cannot precede other jobs")
-        stop = stop_job
+    stop = check_contiguous([(path, jobs_of(meta),
+                              meta["episodes_per_test"] != (jobs_of(meta)[1] - jobs_of(meta)[0]) * CHUNK_EPISODES)
+                             for path, meta, _ in parts], per=" of each test")
+    first = parts[0][1]
     by_delay: dict[float, list[dict]] = defaultdict(list)
     for _, _, tests in parts:
         for test in tests:
@@ -506,18 +445,10 @@ def merge_runs(paths: list[Path], out_dir: Path, command: str) -> dict:
     table = summarise(results)
     episodes = sum(meta["episodes_per_test"] for _, meta, _ in parts)
     last_protocol_jobs = parts[-1][1].get("protocol_jobs", stop)  # runs before --share end their own protocol
-    meta = {key: first.get(key) for key in SAME_PROTOCOL}
+    meta = merged_meta([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL, command)
     meta.update({
-        "checkpoint": first.get("checkpoint"),
-        "checkpoint_sha256": next((m.get("checkpoint_sha256") for _, m, _ in parts if m.get("checkpoint_sha256")),
-                                  None),
         "episodes_per_test": episodes, "jobs": [0, stop], "protocol_jobs": stop,
-        "protocol_episodes_per_test": episodes, "share": None,
-        "workers": sum(m.get("workers", 0) for _, m, _ in parts),
-        "wall_s": round(sum(m.get("wall_s", 0.0) for _, m, _ in parts), 1),  # the parts' own, added up
-        "command": command,
-        "jobs_from_an_earlier_run": sum(m.get("jobs_from_an_earlier_run", 0) for _, m, _ in parts),
-        "platform": first["platform"],
+        "protocol_episodes_per_test": episodes,
         # jobs of the parts' protocol that no part ran (a share left out): the report is then a shorter run
         "jobs_not_joined": max(0, last_protocol_jobs - stop),
         "merged_from": [{"path": str(path), "command": m.get("command"), "jobs": list(jobs_of(m)),
@@ -582,7 +513,7 @@ def run_table1(scenario: str, checkpoint: str | None, episodes: int, workers: in
     tests = [TestSpec(spec, d, episodes, seed + i, checkpoint, scripted)
              for i, d in enumerate(schedule) if sweep_up_to_s is None or d <= sweep_up_to_s]
     jobs_per_test = len(chunks_of(tests[0]))
-    first, stop = share_range(share, jobs_per_test) if share is not None else (0, jobs_per_test)
+    first, stop = share_range(share, jobs_per_test, f"job(s) of at most {CHUNK_EPISODES} episodes per test")
     chunks = [chunk for t in tests for chunk in chunks_of(t)[first:stop]]
     run_episodes = sum(c.episodes for c in chunks_of(tests[0])[first:stop])  # per test
     started = time.monotonic()

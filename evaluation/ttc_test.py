@@ -19,7 +19,7 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
-from evaluation.parallel import cache_salt, clear_partial, numeric_platform, partial_dir, run_parallel
+from evaluation.parallel import cache_salt, clear_partial, file_digest, numeric_platform, partial_dir, run_parallel
 
 TRAFFIC_LEVELS = {"low": 4, "medium": 8, "high": 12}
 SIGNS = (("south", "stop"), ("east", "none"), ("west", "none"), ("north", "none"))
@@ -122,40 +122,102 @@ def sweep_thresholds(thresholds: list[float], episodes: int, delays: list[float]
 
 
 def run_comparison(checkpoint: str | None, threshold_s: float, episodes: int, delays: list[float],
-                   workers: int, seed: int, out_dir: Path, command: str, sweep_rows: list[dict] = ()) -> dict:
+                   workers: int, seed: int, out_dir: Path, command: str, sweep_rows: list[dict] = (),
+                   share: tuple[int, int] | None = None) -> dict:
     """Both drivers on every (traffic level, delay) cell. ``sweep_rows``: rows of a sweep run with
     the same seed and episodes; its TTC cells at ``threshold_s`` are the same episodes, so they are
-    taken as they are instead of being driven again."""
+    taken as they are instead of being driven again. ``share``: (I, N), both drivers on only the
+    I-th of N parts of the cells (in the order low traffic first, each by delay), for
+    ``merge_runs`` to join."""
+    from evaluation.shares import share_range
+
     drivers = ["ttc"] + (["policy"] if checkpoint is not None else [])
     if checkpoint is not None:
         from evaluation.policy import check_checkpoint
         from simcore.scenario import load_scenario
 
         check_checkpoint(checkpoint, load_scenario("hard"))  # the TTC test drives the built-in hard junction
+    cells = [(j, level, i, d) for j, level in enumerate(TRAFFIC_LEVELS) for i, d in enumerate(delays)]
+    first, stop = share_range(share, len(cells), "(traffic level, delay) cells")
     tests = [TTCTest(driver, level, d, episodes, cell_seed(seed, j, i), threshold_s, checkpoint)
-             for driver in drivers
-             for j, level in enumerate(TRAFFIC_LEVELS) for i, d in enumerate(delays)]
+             for driver in drivers for j, level, i, d in cells[first:stop]]
     swept = {(r["level"], r["delay_max_s"]): r for r in sweep_rows
              if r["driver"] == "ttc" and r["threshold_s"] == threshold_s and r["episodes"] == episodes}
     started = time.monotonic()
     to_run = [t for t in tests if not (t.driver == "ttc" and (t.level, t.delay_max_s) in swept)]
     ran = iter(_run_all(to_run, workers, "ttc comparison", out_dir, checkpoint) if to_run else [])
     rows = [swept[(t.level, t.delay_max_s)] if t not in to_run else next(ran) for t in tests]
-    reused = len(tests) - len(to_run)
+    meta = {"checkpoint": checkpoint, "checkpoint_sha256": file_digest(checkpoint) or None, "threshold_s": threshold_s,
+            "episodes_per_cell": episodes, "delays_max_s": delays, "levels": TRAFFIC_LEVELS, "seed": seed,
+            "drivers": drivers,
+            # the (level, delay) cells [first, stop) of the protocol's protocol_cells (levels in
+            # order, each by delay) that both drivers ran; all of them unless --share
+            "cells": [first, stop], "protocol_cells": len(cells), "share": list(share) if share is not None else None,
+            "workers": workers, "wall_s": round(time.monotonic() - started, 1), "command": command,
+            "ttc_cells_from_sweep": len(tests) - len(to_run), "platform": numeric_platform()}
+    paths = write_outputs(out_dir, rows, meta)
+    clear_partial(partial_dir(out_dir, PARTIAL_NAME))
+    return {"rows": rows, "paths": paths, "meta": meta}
+
+
+def write_outputs(out_dir: Path, rows: list[dict], meta: dict) -> list[Path]:
+    """The comparison's CSV, JSON and, when the rows hold every cell, the paper's two figures."""
     out_dir.mkdir(parents=True, exist_ok=True)
     csv_path = out_dir / "ttc-comparison.csv"
     with open(csv_path, "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    pictures = draw_figures(rows, threshold_s, out_dir)
-    meta = {"checkpoint": checkpoint, "threshold_s": threshold_s, "episodes_per_cell": episodes, "delays_max_s": delays,
-            "levels": TRAFFIC_LEVELS, "seed": seed, "wall_s": round(time.monotonic() - started, 1), "command": command,
-            "ttc_cells_from_sweep": reused, "platform": numeric_platform()}
     json_path = out_dir / "ttc-comparison.json"
     json_path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
-    clear_partial(partial_dir(out_dir, PARTIAL_NAME))
-    return {"rows": rows, "paths": [json_path, csv_path, *pictures], "meta": meta}
+    whole = meta.get("cells", [0, 0])[0] == 0 and meta.get("cells", [0, 0])[1] == meta.get("protocol_cells", 0)
+    if "cells" in meta and not whole:  # a share: its figures would miss cells; merge draws them
+        return [json_path, csv_path]
+    return [json_path, csv_path, *draw_figures(rows, meta["threshold_s"], out_dir)]
+
+
+# what every part of one comparison must share for ``merge_runs`` to join them
+SAME_PROTOCOL = ("threshold_s", "episodes_per_cell", "delays_max_s", "levels", "seed", "drivers")
+
+
+def cells_of(meta: dict, rows: list[dict]) -> tuple[int, int]:
+    """The cells [first, stop) a report holds; reports before --share hold them all."""
+    if "cells" in meta:
+        return tuple(meta["cells"])
+    return 0, len({(r["level"], r["delay_max_s"]) for r in rows})
+
+
+def merge_runs(reports: list, out_dir: Path, command: str) -> dict:
+    """Joins TTC comparisons over other cells (``--share``) into the report one run over them all
+    writes: CSV, JSON and figures; refuses runs of other thresholds, sizes, seeds or checkpoints,
+    and runs that overlap or leave a gap, before writing anything. ``reports``: (path, parsed
+    JSON) per run."""
+    from evaluation.shares import check_contiguous, check_same_protocol, merged_meta
+
+    parts = []
+    for path, report in reports:
+        try:
+            meta, rows = report["meta"], report["rows"]
+            meta["threshold_s"]
+        except (KeyError, TypeError) as error:
+            raise ValueError(f"{path}: not a TTC comparison report (no {error})") from None
+        meta.setdefault("drivers", [d for d in ("ttc", "policy") if any(r["driver"] == d for r in rows)])
+        parts.append((path, meta, rows))
+    check_same_protocol([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL)
+    parts.sort(key=lambda part: cells_of(part[1], part[2]))
+    stop = check_contiguous([(path, cells_of(meta, rows), False) for path, meta, rows in parts], noun="cell")
+    drivers = parts[0][1]["drivers"]
+    levels, delays = list(TRAFFIC_LEVELS), parts[0][1]["delays_max_s"]
+    rows = sorted((row for _, _, part_rows in parts for row in part_rows),
+                  key=lambda r: (drivers.index(r["driver"]), levels.index(r["level"]), delays.index(r["delay_max_s"])))
+    meta = merged_meta([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL, command)
+    last_protocol_cells = parts[-1][1].get("protocol_cells", stop)
+    meta.update({"cells": [0, stop], "protocol_cells": stop, "cells_not_joined": max(0, last_protocol_cells - stop),
+                 "ttc_cells_from_sweep": sum(m.get("ttc_cells_from_sweep", 0) for _, m, _ in parts),
+                 "merged_from": [{"path": str(path), "command": m.get("command"), "cells": list(cells_of(m, r)),
+                                  "wall_s": m.get("wall_s"), "platform": m.get("platform")} for path, m, r in parts]})
+    paths = write_outputs(out_dir, rows, meta)
+    return {"rows": rows, "paths": paths, "meta": meta}
 
 
 def draw_figures(rows: list[dict], threshold_s: float, out_dir: Path) -> list[Path]:

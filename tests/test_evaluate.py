@@ -701,3 +701,95 @@ def test_peek_reads_the_finished_jobs_of_a_run_still_going(tmp_path):
     assert "| Reaches, standard error |" in seen.stdout
     nothing = crossway("evaluate", "peek", str(tmp_path / "none"))
     assert nothing.returncode != 0 and "no Table I run in progress" in nothing.stderr
+
+
+def test_right_of_way_shares_merge_into_the_whole_test(tmp_path, monkeypatch):
+    """right-of-way --share I/N runs the I-th of N parts of the test's jobs with their seeds in the
+    whole test; merge joins them (and a report from before --share, which holds rates alone) into
+    the counts one run over every job gives, and refuses parts that overlap or differ."""
+    from evaluation import right_of_way
+    from evaluation.shares import merge_reports
+
+    monkeypatch.setattr(right_of_way, "CHUNK_EPISODES", 2)  # three jobs from five episodes
+    options = DriverOptions(sight="view")
+
+    def run(name, episodes=5, share=None, seed=4):
+        return right_of_way.run_right_of_way("easy", None, episodes, 2, seed, tmp_path / name, f"run {name}", options,
+                                             share=share)
+
+    first, second, whole = run("first", share=(1, 2)), run("second", share=(2, 2)), run("whole")
+    assert (first["jobs"], second["jobs"], first["protocol_jobs"]) == ([0, 1], [1, 3], 3)
+    assert (first["episodes"], second["episodes"], whole["episodes"]) == (2, 3, 5)
+    assert "Share 2/2 of the test: jobs 2-3 of its 3, 3 of its 5 episodes" in \
+        (tmp_path / "second" / "right-of-way-easy.md").read_text()
+    old = json.loads((tmp_path / "first" / "right-of-way-easy.json").read_text())  # as written before --share
+    for key in ("jobs", "protocol_jobs", "protocol_episodes", "share", "no_infraction_episodes",
+                "no_seen_infraction_episodes"):
+        del old[key]
+    (tmp_path / "old-right-of-way-easy.json").write_text(json.dumps(old))
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "right-of-way-easy.json").write_text(json.dumps(old))
+
+    joined = merge_reports([tmp_path / "second", tmp_path / "old"], tmp_path / "joined", "merge")
+    assert joined["kind"] == "right-of-way"
+    merged = json.loads((tmp_path / "joined" / "right-of-way-easy.json").read_text())
+    for key in ("episodes", "no_infraction", "no_seen_infraction", "no_infraction_episodes", "infractions",
+                "infractions_seen_in_time", "infractions_offender_crashed", "agent_end_reasons"):
+        assert merged[key] == whole[key], key
+    assert sum(merged["agent_end_reasons"].values()) == 5 * 3
+    assert [p["jobs"] for p in merged["merged_from"]] == [[0, 1], [1, 3]] and merged["jobs_not_joined"] == 0
+    assert "Joined from runs over other jobs of the test" in (tmp_path / "joined" / "right-of-way-easy.md").read_text()
+    assert (tmp_path / "joined" / "right-of-way-easy.csv").read_text().splitlines()[1].startswith("easy,5,")
+
+    with pytest.raises(ValueError, match="overlap"):
+        merge_reports([tmp_path / "first", tmp_path / "whole"], tmp_path / "refused", "merge")
+    with pytest.raises(ValueError, match="leave a gap"):
+        merge_reports([tmp_path / "second", tmp_path / "second"], tmp_path / "refused", "merge")
+    run("other-seed", share=(1, 2), seed=5)
+    with pytest.raises(ValueError, match="seed 5 against 4|seed 4 against 5"):
+        merge_reports([tmp_path / "other-seed", tmp_path / "second"], tmp_path / "refused", "merge")
+    (tmp_path / "table1").mkdir()
+    (tmp_path / "table1" / "table1-easy.json").write_text("{}")
+    with pytest.raises(ValueError, match="different protocols"):
+        merge_reports([tmp_path / "first", tmp_path / "table1"], tmp_path / "refused", "merge")
+    assert not (tmp_path / "refused").exists()
+    run("one-of-three", share=(2, 3))
+    short = merge_reports([tmp_path / "old", tmp_path / "one-of-three"], tmp_path / "short", "merge")
+    assert short["meta"]["jobs"] == [0, 2] and short["meta"]["jobs_not_joined"] == 1  # share 3/3 left out
+    with pytest.raises(ValueError, match="share out"):
+        run("too-many", share=(1, 4))
+
+
+def test_ttc_shares_merge_into_the_whole_comparison(tmp_path):
+    """ttc --share I/N runs both drivers on the I-th of N parts of the (level, delay) cells; merge
+    joins the parts into the rows and figures one run over every cell writes."""
+    policy = tmp_path / "policy.pt"
+    torch.save(LearnerCore().state_dict(), policy)
+    common = ("evaluate", "ttc", "--checkpoint", str(policy), "--threshold", "10", "--episodes", "2", "--delays",
+              "20", "--workers", "2")
+    first = crossway(*common, "--share", "1/2", "--out", str(tmp_path / "first"))
+    second = crossway(*common, "--share", "2/2", "--out", str(tmp_path / "second"))
+    whole = crossway(*common, "--out", str(tmp_path / "whole"))
+    assert first.returncode == second.returncode == whole.returncode == 0, first.stderr + second.stderr + whole.stderr
+    assert "share 1/2: cells 1-1 of 3" in first.stdout
+    assert not (tmp_path / "first" / "ttc-goal.png").exists()  # a share's figures would miss cells
+    meta = json.loads((tmp_path / "second" / "ttc-comparison.json").read_text())["meta"]
+    assert (meta["cells"], meta["protocol_cells"], meta["share"]) == ([1, 3], 3, [2, 2])
+
+    joined = crossway("evaluate", "merge", str(tmp_path / "second"), str(tmp_path / "first"), "--out",
+                      str(tmp_path / "joined"))
+    assert joined.returncode == 0, joined.stderr
+    assert "joined 2 runs, 3 (level, delay) cells" in joined.stdout
+    merged = json.loads((tmp_path / "joined" / "ttc-comparison.json").read_text())
+    reference = json.loads((tmp_path / "whole" / "ttc-comparison.json").read_text())
+    assert merged["rows"] == reference["rows"]
+    assert (tmp_path / "joined" / "ttc-comparison.csv").read_text() == (tmp_path / "whole" / "ttc-comparison.csv").read_text()
+    for name in ("ttc-goal.png", "ttc-time_over.png"):
+        assert (tmp_path / "joined" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert merged["meta"]["cells"] == [0, 3] and merged["meta"]["cells_not_joined"] == 0
+
+    only_first = crossway("evaluate", "merge", str(tmp_path / "first"), str(tmp_path / "first"), "--out",
+                          str(tmp_path / "refused"))
+    assert only_first.returncode != 0 and "overlap" in only_first.stderr and not (tmp_path / "refused").exists()
+    swept = crossway(*common, "--sweep", "8,10", "--share", "1/2", "--out", str(tmp_path / "refused"))
+    assert swept.returncode != 0 and "--share goes with --threshold" in swept.stderr

@@ -48,15 +48,19 @@ def add_parser(subparsers) -> None:
     table1.set_defaults(func=run_table1_command)
 
     merge = experiments.add_parser(
-        "merge", help="join Table I runs over other jobs of each test (--share) into one table",
-        description="Join the output folders (or table1-*.json reports) of Table I runs of one protocol that "
-                    "ran other jobs of every test, e.g. 'table1 --share 1/2' and '--share 2/2' on two machines, "
-                    "into the report one run over all their jobs would have written: the same JSON, CSV, "
-                    "Markdown and picture. A run of fewer --episodes counts as the first jobs of the protocol "
-                    "(its episodes are the first ones of each test). Refuses runs of other scenarios, seeds, "
-                    "sign restarts or checkpoints (by SHA-256 where both reports have it), and runs that "
-                    "overlap or leave a gap, before writing anything.", formatter_class=fmt)
-    merge.add_argument("runs", nargs="+", type=Path, metavar="RUN", help="output folder or table1-*.json of a run")
+        "merge", help="join runs of one protocol over other jobs (--share) into one report",
+        description="Join the output folders (or reports) of runs of one protocol that ran other jobs of it, e.g. "
+                    "'table1 --share 1/2' and '--share 2/2' on two machines, into the report one run over all "
+                    "their jobs would have written: the same JSON, CSV, Markdown and pictures. Works for Table I "
+                    "(table1-*.json: 500-episode jobs of every test), the right-of-way test (right-of-way-*.json: "
+                    "150-episode jobs) and the TTC comparison (ttc-comparison.json: (traffic level, delay) "
+                    "cells). A run of fewer --episodes counts as the first jobs of the protocol (Table I and "
+                    "right of way: its episodes are the first ones). Refuses runs of two protocols, of other "
+                    "scenarios, seeds, sizes, sign restarts or checkpoints (by SHA-256 where both reports have "
+                    "it), and runs that overlap or leave a gap, before writing anything.", formatter_class=fmt)
+    merge.add_argument("runs", nargs="+", type=Path, metavar="RUN",
+                       help="output folder of a run, or its report (table1-*.json, right-of-way-*.json, "
+                            "ttc-comparison.json)")
     merge.add_argument("--out", type=Path, required=True, help="output directory for the joined report")
     merge.set_defaults(func=run_merge_command)
 
@@ -83,6 +87,10 @@ def add_parser(subparsers) -> None:
     _add_policy_options(rules, scripted=True, scenario=True)
     _add_scripted_options(rules)
     _add_run_options(rules, episodes=9000, episodes_help="episodes (the paper: 9000)")
+    rules.add_argument("--share", default=None, metavar="I/N",
+                       help="run only the I-th of N shares of the test's jobs (of 150 episodes each, with the seeds "
+                            "they have in the whole test), e.g. 1/2 and 2/2 on two machines; 'crossway evaluate "
+                            "merge' then joins the output folders. Default: every job")
     rules.set_defaults(func=run_right_of_way_command)
 
     ttc = experiments.add_parser(
@@ -99,6 +107,11 @@ def add_parser(subparsers) -> None:
                      help="comma-separated thresholds [s] to sweep first; the best zero-crash one is used")
     ttc.add_argument("--delays", default="20,40,60,80,100", help="comma-separated traffic delay_max values [s]")
     _add_run_options(ttc, episodes=200, episodes_help="ego episodes per (level, delay) cell")
+    ttc.add_argument("--share", default=None, metavar="I/N",
+                     help="run both drivers on only the I-th of N shares of the (level, delay) cells, low traffic "
+                          "first, each with the seed it has in the whole comparison; 'crossway evaluate merge' then "
+                          "joins the output folders and draws the figures. Needs --threshold (not --sweep). "
+                          "Default: every cell")
     ttc.set_defaults(func=run_ttc_command)
 
     reaction = experiments.add_parser(
@@ -229,7 +242,8 @@ def _checked(args) -> str | None:
 
 
 def run_table1_command(args) -> int:
-    from evaluation.table1 import markdown, parse_share, run_table1
+    from evaluation.shares import parse_share
+    from evaluation.table1 import markdown, run_table1
 
     checkpoint = _checked(args)
     share = parse_share(args.share) if args.share is not None else None
@@ -242,17 +256,28 @@ def run_table1_command(args) -> int:
 
 
 def run_merge_command(args) -> int:
-    from evaluation.table1 import markdown, merge_runs
+    from evaluation.shares import merge_reports
 
-    report = merge_runs(args.runs, args.out, _command_line())
-    meta = report["meta"]
-    print(markdown(meta["scenario"], report["table"]), end="")
-    print(f"joined {len(meta['merged_from'])} runs, {meta['episodes_per_test']} episodes per test; wrote "
-          + ", ".join(str(p) for p in report["paths"]))
-    if meta["jobs_not_joined"]:
-        print(f"note: the shares' protocol has {meta['jobs_not_joined']} more job(s) per test that no run given "
-              f"holds; the report is of the first {meta['jobs'][1]} jobs, {meta['episodes_per_test']} episodes "
-              "per test", file=sys.stderr)
+    report = merge_reports(args.runs, args.out, _command_line())
+    meta, kind = report["meta"], report["kind"]
+    if kind == "table1":
+        from evaluation.table1 import markdown
+
+        print(markdown(meta["scenario"], report["table"]), end="")
+        size, missing = f"{meta['episodes_per_test']} episodes per test", meta["jobs_not_joined"]
+    elif kind == "right-of-way":
+        print(report["summary"]["markdown"], end="")
+        size, missing = f"{meta['protocol_episodes']} episodes", meta["jobs_not_joined"]
+    else:
+        for row in report["rows"]:
+            print(f"{row['driver']:6s} {row['level']:6s} delay {row['delay_max_s']:5g} s: reach "
+                  f"{row['goal_rate']:.3f} crash {row['crash_rate']:.3f} time-over {row['time_over_rate']:.3f}")
+        size, missing = f"{meta['cells'][1]} (level, delay) cells", meta["cells_not_joined"]
+    print(f"joined {len(meta['merged_from'])} runs, {size}; wrote " + ", ".join(str(p) for p in report["paths"]))
+    if missing:
+        unit = "cell(s)" if kind == "ttc" else "job(s)" + " per test" * (kind == "table1")
+        print(f"note: the shares' protocol has {missing} more {unit} that no run given holds; the report is of "
+              f"the first {(meta.get('jobs') or meta.get('cells'))[1]}, {size}", file=sys.stderr)
     return 0
 
 
@@ -269,11 +294,16 @@ def _command_line() -> str:
 
 def run_right_of_way_command(args) -> int:
     from evaluation.right_of_way import run_right_of_way
+    from evaluation.shares import parse_share
 
     checkpoint = _checked(args)
+    share = parse_share(args.share) if args.share is not None else None
     summary = run_right_of_way(args.scenario, checkpoint, args.episodes, args.workers, args.seed, args.out,
-                               _command_line(), **_scripted_options(args, checkpoint))
+                               _command_line(), **_scripted_options(args, checkpoint), share=share)
     print(summary["markdown"], end="")
+    if share is not None:
+        print(f"share {share[0]}/{share[1]}: {summary['episodes']} of the test's {args.episodes} episodes; "
+              "'crossway evaluate merge' joins the shares")
     print("wrote " + ", ".join(summary["paths"]) + f" in {summary['wall_s']} s")
     return 0
 
@@ -300,10 +330,15 @@ def _floats(text: str, option: str) -> list[float]:
 
 
 def run_ttc_command(args) -> int:
+    from evaluation.shares import parse_share
     from evaluation.ttc_test import run_comparison, sweep_thresholds
 
     checkpoint = _checked(args)
     delays = _floats(args.delays, "--delays")
+    share = parse_share(args.share) if args.share is not None else None
+    if share is not None and args.sweep:
+        raise ValueError("--share goes with --threshold, not --sweep: the sweep picks the threshold from every cell; "
+                         "sweep first (or choose the threshold), then share the comparison")
     threshold = args.threshold
     if threshold <= 0:
         raise ValueError(f"--threshold must be > 0, got {threshold}")
@@ -319,13 +354,16 @@ def run_ttc_command(args) -> int:
         threshold = best
         print(f"sweep: chose {threshold:g} s")
     report = run_comparison(checkpoint, threshold, args.episodes, delays, args.workers, args.seed, args.out,
-                            _command_line(), sweep_rows=rows)
+                            _command_line(), sweep_rows=rows, share=share)
     if report["meta"]["ttc_cells_from_sweep"]:
         print(f"comparison: the TTC agent's {report['meta']['ttc_cells_from_sweep']} cells at {threshold:g} s "
               "are the sweep's (same seeds, same episodes)")
     for row in report["rows"]:
         print(f"{row['driver']:6s} {row['level']:6s} delay {row['delay_max_s']:5g} s: reach {row['goal_rate']:.3f} "
               f"crash {row['crash_rate']:.3f} time-over {row['time_over_rate']:.3f}")
+    if share is not None:
+        print(f"share {share[0]}/{share[1]}: cells {report['meta']['cells'][0] + 1}-{report['meta']['cells'][1]} of "
+              f"{report['meta']['protocol_cells']}; 'crossway evaluate merge' joins the shares and draws the figures")
     print("wrote " + ", ".join(str(p) for p in report["paths"]) + f" in {report['meta']['wall_s']} s")
     return 0
 
