@@ -82,6 +82,20 @@ def read_report(path: Path) -> dict:
     return report
 
 
+def unpack(reports: list[tuple[Path, dict]], body: str, needed: str, name: str) -> list[tuple[Path, dict, list]]:
+    """(path, meta, body) of each report of a protocol whose JSON is {"meta": ..., body: [...]};
+    refuses one without them, or whose meta lacks ``needed``, as not a ``name`` report."""
+    parts = []
+    for path, report in reports:
+        try:
+            meta, rows = report["meta"], report[body]
+            meta[needed]
+        except (KeyError, TypeError) as error:
+            raise ValueError(f"{path}: not a {name} report (no {error})") from None
+        parts.append((path, meta, rows))
+    return parts
+
+
 def check_same_protocol(parts: list[tuple[Path, dict]], keys: tuple[str, ...]) -> None:
     """Refuses parts (report path, its meta) that differ in any of ``keys`` or in the checkpoint
     they evaluated (by SHA-256 where both record it, else by path)."""

@@ -22,7 +22,7 @@ import numpy as np
 
 from evaluation.parallel import (cache_salt, clear_partial, file_digest, kept_jobs, numeric_platform, partial_dir,
                                  platform_line, run_parallel)
-from evaluation.shares import check_contiguous, check_same_protocol, jobs_text, merged_meta, share_range
+from evaluation.shares import check_contiguous, check_same_protocol, jobs_text, merged_meta, share_range, unpack
 from simcore.controller import DriverOptions
 from simcore.dynamics import DT
 
@@ -423,14 +423,7 @@ def merge_runs(reports: list[tuple[Path, dict]], out_dir: Path, command: str) ->
     its --episodes), into the report of one run over them all; refuses parts of other protocols,
     checkpoints or seeds, parts that overlap or leave a gap, before writing anything.
     ``reports``: (path, its parsed JSON) per part (``evaluation.shares.merge_reports``)."""
-    parts = []
-    for json_path, report in reports:
-        try:
-            meta, tests = report["meta"], report["tests"]
-            meta["episodes_per_test"]
-        except (KeyError, TypeError) as error:
-            raise ValueError(f"{json_path}: not a Table I report (no {error})") from None
-        parts.append((json_path, meta, tests))
+    parts = unpack(reports, "tests", "episodes_per_test", "Table I")
     check_same_protocol([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL)
     parts.sort(key=lambda part: jobs_of(part[1]))
     stop = check_contiguous([(path, jobs_of(meta),

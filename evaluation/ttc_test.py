@@ -192,17 +192,11 @@ def merge_runs(reports: list, out_dir: Path, command: str) -> dict:
     writes: CSV, JSON and figures; refuses runs of other thresholds, sizes, seeds or checkpoints,
     and runs that overlap or leave a gap, before writing anything. ``reports``: (path, parsed
     JSON) per run."""
-    from evaluation.shares import check_contiguous, check_same_protocol, merged_meta
+    from evaluation.shares import check_contiguous, check_same_protocol, merged_meta, unpack
 
-    parts = []
-    for path, report in reports:
-        try:
-            meta, rows = report["meta"], report["rows"]
-            meta["threshold_s"]
-        except (KeyError, TypeError) as error:
-            raise ValueError(f"{path}: not a TTC comparison report (no {error})") from None
+    parts = unpack(reports, "rows", "threshold_s", "TTC comparison")
+    for _, meta, rows in parts:  # reports before session 38 name no drivers
         meta.setdefault("drivers", [d for d in ("ttc", "policy") if any(r["driver"] == d for r in rows)])
-        parts.append((path, meta, rows))
     check_same_protocol([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL)
     parts.sort(key=lambda part: cells_of(part[1], part[2]))
     stop = check_contiguous([(path, cells_of(meta, rows), False) for path, meta, rows in parts], noun="cell")
