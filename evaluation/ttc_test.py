@@ -170,8 +170,7 @@ def write_outputs(out_dir: Path, rows: list[dict], meta: dict) -> list[Path]:
         writer.writerows(rows)
     json_path = out_dir / "ttc-comparison.json"
     json_path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
-    whole = meta.get("cells", [0, 0])[0] == 0 and meta.get("cells", [0, 0])[1] == meta.get("protocol_cells", 0)
-    if "cells" in meta and not whole:  # a share: its figures would miss cells; merge draws them
+    if meta["cells"] != [0, meta["protocol_cells"]]:  # a share: its figures would miss cells; merge draws them
         return [json_path, csv_path]
     return [json_path, csv_path, *draw_figures(rows, meta["threshold_s"], out_dir)]
 
