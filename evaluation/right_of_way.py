@@ -317,6 +317,9 @@ def write_outputs(out_dir, counts: dict, meta: dict) -> dict:
                  "`crossway evaluate merge` joins the shares.\n\n")
     if meta.get("merged_from"):
         page += "Joined from runs over other jobs of the test:\n\n" + merged_from_lines(meta["merged_from"]) + "\n"
+        if meta.get("jobs_not_joined"):
+            page += (f"The parts' test has {meta['jobs_not_joined']} more job(s) that no part holds: this is its "
+                     f"first {episodes} episodes.\n\n")
     stem.with_suffix(".md").write_text(page + table)
     summary["markdown"] = table
     summary["paths"] = [str(stem.with_suffix(x)) for x in (".json", ".csv", ".md")]

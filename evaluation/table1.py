@@ -341,6 +341,9 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
             page += (f"- {jobs_text(*part['jobs'])}, {part['episodes_per_test']} episodes per test, "
                      f"{part['wall_s']} s: `{part['command']}` ({ran_on[0].lower() + ran_on[1:]})\n")
         page += "\n"
+        if meta.get("jobs_not_joined"):
+            page += (f"The parts' protocol has {meta['jobs_not_joined']} more job(s) per test that no part holds: "
+                     f"this is each test's first {meta['episodes_per_test']} episodes.\n\n")
     page += markdown(scenario, table)
     cut = sum(sum(t.get("cut_by_redraw", {}).values()) for t in tests)
     if cut:  # signs redrawn during the tests (hard)

@@ -653,6 +653,15 @@ def test_table1_shares_merge_into_the_whole_protocol(tmp_path):
     page = (tmp_path / "joined" / "table1-hard.md").read_text()
     assert "Joined from runs over other jobs of each test" in page and "--share 2/2" in page
     assert merged["meta"]["jobs_not_joined"] == 0 and "note:" not in joined.stderr
+    as_of_three = _report(tmp_path / "second")  # as if share 2/3 of a protocol of three jobs per test
+    as_of_three["meta"].update(protocol_jobs=3, share=[2, 3], protocol_episodes_per_test=1500)
+    (tmp_path / "of-three").mkdir()
+    (tmp_path / "of-three" / "table1-hard.json").write_text(json.dumps(as_of_three))
+    short = crossway("evaluate", "merge", str(tmp_path / "old"), str(tmp_path / "of-three"), "--out", str(tmp_path / "short"))
+    assert short.returncode == 0 and _report(tmp_path / "short")["meta"]["jobs_not_joined"] == 1
+    assert "note: the shares' protocol has 1 more job(s) per test that no run given holds" in short.stderr
+    assert "1 more job(s) per test that no part holds: this is each test's first 1000 episodes" in \
+        (tmp_path / "short" / "table1-hard.md").read_text()
 
     def refused(*runs):
         out = tmp_path / f"refused{len(list(tmp_path.iterdir()))}"
@@ -756,6 +765,8 @@ def test_right_of_way_shares_merge_into_the_whole_test(tmp_path, monkeypatch):
     run("one-of-three", share=(2, 3))
     short = merge_reports([tmp_path / "old", tmp_path / "one-of-three"], tmp_path / "short", "merge")
     assert short["meta"]["jobs"] == [0, 2] and short["meta"]["jobs_not_joined"] == 1  # share 3/3 left out
+    assert "1 more job(s) that no part holds: this is its first 4 episodes" in \
+        (tmp_path / "short" / "right-of-way-easy.md").read_text()
     with pytest.raises(ValueError, match="share out"):
         run("too-many", share=(1, 4))
 
