@@ -167,8 +167,11 @@ def numeric_platform() -> dict:
             "kernel_variables": {name: os.environ[name] for name in KERNEL_VARIABLES if name in os.environ}}
 
 
-def platform_line(platform: dict) -> str:
-    """``numeric_platform()`` in one line for a results page: what the numbers ran on."""
+def platform_line(platform: dict | None) -> str:
+    """``numeric_platform()`` in one line for a results page: what the numbers ran on (None: a
+    report from before session 28, which did not record it)."""
+    if not platform:
+        return "The machine it ran on is not on record."
     variables = "".join(f"; {name}={value}" for name, value in sorted(platform["kernel_variables"].items()))
     return (f"Ran on {platform['cpu']} ({platform['torch_cpu_capability']}), torch {platform['torch']}, "
             f"numpy {platform['numpy']}{variables}.")

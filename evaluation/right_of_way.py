@@ -332,7 +332,7 @@ def merged_from_lines(parts: list[dict]) -> str:
 
     lines = ""
     for part in parts:
-        ran_on = platform_line(part["platform"]).rstrip(".") if part.get("platform") else "machine not recorded"
+        ran_on = platform_line(part.get("platform")).rstrip(".")
         lines += (f"- {jobs_text(*part['jobs'])}, {part['episodes']} episodes, {part['wall_s']} s: "
                   f"`{part['command']}` ({ran_on[0].lower() + ran_on[1:]})\n")
     return lines

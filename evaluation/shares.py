@@ -145,7 +145,8 @@ def merged_meta(parts: list[tuple[Path, dict]], keys: tuple[str, ...], command: 
         "wall_s": round(sum(m.get("wall_s", 0.0) or 0.0 for _, m in parts), 1),  # the parts' own, added up
         "command": command,
         "jobs_from_an_earlier_run": sum(m.get("jobs_from_an_earlier_run", 0) or 0 for _, m in parts),
-        "platform": first.get("platform"),
+        # the first part's machine that is on record (reports before session 28 have none)
+        "platform": next((m.get("platform") for _, m in parts if m.get("platform")), None),
     })
     return meta
 

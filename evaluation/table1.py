@@ -337,7 +337,7 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
     if meta.get("merged_from"):
         page += "Joined from runs over other jobs of each test:\n\n"
         for part in meta["merged_from"]:
-            ran_on = platform_line(part["platform"]).rstrip(".")
+            ran_on = platform_line(part.get("platform")).rstrip(".")
             page += (f"- {jobs_text(*part['jobs'])}, {part['episodes_per_test']} episodes per test, "
                      f"{part['wall_s']} s: `{part['command']}` ({ran_on[0].lower() + ran_on[1:]})\n")
         page += "\n"

@@ -733,7 +733,7 @@ def test_right_of_way_shares_merge_into_the_whole_test(tmp_path, monkeypatch):
         (tmp_path / "second" / "right-of-way-easy.md").read_text()
     old = json.loads((tmp_path / "first" / "right-of-way-easy.json").read_text())  # as written before --share
     for key in ("jobs", "protocol_jobs", "protocol_episodes", "share", "no_infraction_episodes",
-                "no_seen_infraction_episodes"):
+                "no_seen_infraction_episodes", "platform"):  # nor, before session 28, its machine
         del old[key]
     (tmp_path / "old-right-of-way-easy.json").write_text(json.dumps(old))
     (tmp_path / "old").mkdir()
@@ -747,7 +747,9 @@ def test_right_of_way_shares_merge_into_the_whole_test(tmp_path, monkeypatch):
         assert merged[key] == whole[key], key
     assert sum(merged["agent_end_reasons"].values()) == 5 * 3
     assert [p["jobs"] for p in merged["merged_from"]] == [[0, 1], [1, 3]] and merged["jobs_not_joined"] == 0
-    assert "Joined from runs over other jobs of the test" in (tmp_path / "joined" / "right-of-way-easy.md").read_text()
+    page = (tmp_path / "joined" / "right-of-way-easy.md").read_text()
+    assert "Joined from runs over other jobs of the test" in page
+    assert merged["platform"] == second["platform"] and "(the machine it ran on is not on record)" in page
     assert (tmp_path / "joined" / "right-of-way-easy.csv").read_text().splitlines()[1].startswith("easy,5,")
 
     with pytest.raises(ValueError, match="overlap"):
