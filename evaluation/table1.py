@@ -429,9 +429,9 @@ def merge_runs(reports: list[tuple[Path, dict]], out_dir: Path, command: str) ->
     parts = unpack(reports, "tests", "episodes_per_test", "Table I")
     check_same_protocol([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL)
     parts.sort(key=lambda part: jobs_of(part[1]))
-    stop = check_contiguous([(path, jobs_of(meta),
-                              meta["episodes_per_test"] != (jobs_of(meta)[1] - jobs_of(meta)[0]) * CHUNK_EPISODES)
-                             for path, meta, _ in parts], per=" of each test")
+    ranges = [(path, jobs_of(meta), meta["episodes_per_test"]) for path, meta, _ in parts]
+    stop = check_contiguous([(path, (first_job, stop_job), episodes != (stop_job - first_job) * CHUNK_EPISODES)
+                             for path, (first_job, stop_job), episodes in ranges], per=" of each test")
     first = parts[0][1]
     by_delay: dict[float, list[dict]] = defaultdict(list)
     for _, _, tests in parts:

@@ -806,3 +806,8 @@ def test_ttc_shares_merge_into_the_whole_comparison(tmp_path):
     assert only_first.returncode != 0 and "overlap" in only_first.stderr and not (tmp_path / "refused").exists()
     swept = crossway(*common, "--sweep", "8,10", "--share", "1/2", "--out", str(tmp_path / "refused"))
     assert swept.returncode != 0 and "--share goes with --threshold" in swept.stderr
+    for bad, says in (("0/2", "1 <= I <= N"), ("3/2", "1 <= I <= N"), ("half", "--share takes I/N"),
+                      ("1/4", "only 3 (traffic level, delay) cells to share out")):
+        refused = crossway(*common, "--share", bad, "--out", str(tmp_path / "refused"))
+        assert refused.returncode != 0 and says in refused.stderr, refused.stderr
+    assert not (tmp_path / "refused").exists()

@@ -264,20 +264,22 @@ def run_merge_command(args) -> int:
         from evaluation.table1 import markdown
 
         print(markdown(meta["scenario"], report["table"]), end="")
-        size, missing = f"{meta['episodes_per_test']} episodes per test", meta["jobs_not_joined"]
+        size, joined, missing = f"{meta['episodes_per_test']} episodes per test", meta["jobs"][1], meta["jobs_not_joined"]
+        unit = "job(s) per test"
     elif kind == "right-of-way":
         print(report["summary"]["markdown"], end="")
-        size, missing = f"{meta['protocol_episodes']} episodes", meta["jobs_not_joined"]
+        size, joined, missing = f"{meta['protocol_episodes']} episodes", meta["jobs"][1], meta["jobs_not_joined"]
+        unit = "job(s)"
     else:
         for row in report["rows"]:
             print(f"{row['driver']:6s} {row['level']:6s} delay {row['delay_max_s']:5g} s: reach "
                   f"{row['goal_rate']:.3f} crash {row['crash_rate']:.3f} time-over {row['time_over_rate']:.3f}")
-        size, missing = f"{meta['cells'][1]} (level, delay) cells", meta["cells_not_joined"]
+        size, joined, missing = f"{meta['cells'][1]} (level, delay) cells", meta["cells"][1], meta["cells_not_joined"]
+        unit = "cell(s)"
     print(f"joined {len(meta['merged_from'])} runs, {size}; wrote " + ", ".join(str(p) for p in report["paths"]))
     if missing:
-        unit = "cell(s)" if kind == "ttc" else "job(s)" + " per test" * (kind == "table1")
         print(f"note: the shares' protocol has {missing} more {unit} that no run given holds; the report is of "
-              f"the first {(meta.get('jobs') or meta.get('cells'))[1]}, {size}", file=sys.stderr)
+              f"the first {joined}, {size}", file=sys.stderr)
     return 0
 
 
