@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from algo.policy import (ACTION_SCALE, Policy, ensemble_members, load_policy, member_weights, require_views,
+from algo.policy import (ACTION_SCALE, Policy, PolicyConfig, ensemble_members, load_policy, member_weights, require_views,
                          save_atomically)
-from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
+from algo.stacked import conv2_matrices, first_layer_matrix, forward_distinct, forward_full
 
 
 def check_checkpoint(checkpoint: str | Path, spec) -> None:
@@ -47,7 +47,8 @@ class PolicyDriver:
     about twice as fast on a CPU as its convolution modules for these layer shapes). A network
     that splits into K equal blocks (an output ensemble, ``algo.policy.ensemble``) runs as K
     weight sets at once, whose outputs before the tanh add up: the same function without the
-    dense layers' zero blocks. An ensemble with a ``caution`` (``algo.policy.Caution``) takes
+    dense layers' zero blocks. A network wider than one of the paper's sizes (an ensemble) multiplies
+    only the distinct patches and windows of the views (``algo.stacked.forward_distinct``). An ensemble with a ``caution`` (``algo.policy.Caution``) takes
     its acceleration as the members' mean minus that many standard deviations of their votes.
     """
 
@@ -73,16 +74,21 @@ class PolicyDriver:
         channels = self._params["acc.conv1.weight"].shape[1]
         order = torch.arange(2 * self.members * channels).reshape(2, self.members, channels).transpose(0, 1).flatten()
         self._first_layer = (matrix[:, order].contiguous(), bias[order].contiguous())
+        self._second_layer = conv2_matrices(self._params)
+        # grouping equal patches pays once the first layer is wider than one network of the paper's
+        # sizes ('crossway bench policy': about 1.9x for nine members, level for one)
+        self._distinct = matrix.shape[1] > 2 * PolicyConfig().conv1_channels
 
     def heads(self, views: np.ndarray, scalars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Means and values [B, 2] (acc, sa) for uint8 views [B, 16, 84, 84] and speeds [B, 2] m/s."""
         k = self.members
         with torch.no_grad():
-            pre1 = conv1(patches(torch.from_numpy(np.ascontiguousarray(views))), *self._first_layer)
-            n = pre1.shape[0]
-            pre1 = pre1.reshape(n, pre1.shape[1], k, -1).permute(2, 0, 1, 3)  # [K, N, 441, 2*C1]
             speeds = torch.from_numpy(np.ascontiguousarray(scalars, dtype=np.float32))
-            pre_mu, values = after_conv1(pre1, speeds[None].expand(k, *speeds.shape), self._params, squash=False)
+            views_t = torch.from_numpy(np.ascontiguousarray(views))
+            if self._distinct:
+                pre_mu, values = forward_distinct(views_t, speeds, self._params, self._first_layer, self._second_layer)
+            else:
+                pre_mu, values = forward_full(views_t, speeds, self._params, self._first_layer)  # [K, N, 2] each
             if self.caution is None:
                 mu = torch.tanh(pre_mu.sum(0))
             else:  # the members' own pre-activations; acceleration: mean - c * std (algo.policy.Caution)

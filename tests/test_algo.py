@@ -9,7 +9,7 @@ import torch
 from algo.d_a3c import (ActorCore, DA3CConfig, EpisodeLearner, ExplorationNoise, gae_advantages, gaussian_log_prob,
                         n_step_returns, stream_loss)
 from algo.policy import Policy, preprocess, sigma_at
-from algo.stacked import after_conv1, conv1, first_layer_matrix, patches
+from algo.stacked import after_conv1, conv1, first_layer_matrix, patches, unique_patches
 from learner.core import LearnerConfig, LearnerCore, StaleGradient
 from simcore.simulator import SimConfig, Simulator
 
@@ -269,6 +269,66 @@ def test_matrix_form_of_the_network_matches_the_modules():
             torch.testing.assert_close(pre1[b, :, :, :16], reference, atol=1e-4, rtol=1e-4)
             torch.testing.assert_close(mu[b], torch.stack([mu_acc, mu_sa], 1), atol=1e-5, rtol=1e-4)
             torch.testing.assert_close(values[b], torch.stack([v_acc, v_sa], 1), atol=1e-5, rtol=1e-4)
+
+
+def test_distinct_patches_group_equal_patches_exactly_even_when_hashes_collide(monkeypatch):
+    """unique_patches gives each patch the row of an equal patch, whatever the hash does."""
+    import algo.stacked as stacked
+
+    raw = np.zeros((2, 16, 84, 84), dtype=np.uint8)
+    raw[0, :, :4, :4] = 255  # patch 0 of view 0: every byte 255 (0xff.. words, -1 as int64)
+    raw[1, 3, 40:44, 8:12] = 7  # a patch of view 1 in one plane,
+    raw[1, 3, 43, 11] = 8  # ... one byte of it 8,
+    raw[1, 3, 44, 8] = 7  # and the patch below it holding a single 7
+    rows, inverse = unique_patches(torch.from_numpy(raw))
+    assert rows.shape == (4, 256)  # zero, all 255, and the two nearly equal ones
+    full = patches(torch.from_numpy(raw)).reshape(-1, 256)
+    torch.testing.assert_close(rows[inverse], full, rtol=0, atol=0)
+    # every hash equal: the exact grouping takes over and gives the same groups
+    monkeypatch.setattr(stacked, "_row_hashes", lambda words: torch.zeros(len(words), dtype=torch.int64))
+    rows_exact, inverse_exact = unique_patches(torch.from_numpy(raw))
+    assert rows_exact.shape == (4, 256)
+    torch.testing.assert_close(rows_exact[inverse_exact], full, rtol=0, atol=0)
+
+
+def test_acting_on_distinct_patches_and_windows_gives_the_full_networks_outputs():
+    """forward_distinct on a simulator's views (mostly flat) equals the full matrix form to float
+    rounding, for one car and for several; noise views (few equal patches) go the full way after
+    the first layer and give the same outputs too."""
+    from algo.policy import ensemble, member_weights
+    from algo.stacked import conv1_unique, conv2_matrices, forward_distinct
+    from evaluation.policy import PolicyDriver
+
+    torch.manual_seed(7)
+    members = [Policy() for _ in range(3)]
+    with torch.no_grad():
+        for member in members:
+            for p in member.parameters():
+                p.add_(0.05 * torch.randn_like(p))
+    params = member_weights(ensemble(members), 3)
+    first_layer = PolicyDriver(None, ensemble(members))._first_layer
+    sim = Simulator("hard", SimConfig(delay_max_s=0.0), seed=3)
+    result = sim.reset()
+    for _ in range(20):
+        result = sim.step(np.zeros((sim.num_slots, 2)))
+    active = np.flatnonzero(sim.learners_present)
+    assert len(active) >= 4
+    noise = np.random.default_rng(2).integers(0, 256, (3, 16, 84, 84), dtype=np.uint8)
+    for views, scalars in ((result.views[active], result.scalars[active]), (result.views[active[:1]],
+                           result.scalars[active[:1]]), (noise, result.scalars[active[:3]])):
+        views_t, scalars_t = torch.from_numpy(np.ascontiguousarray(views)), torch.from_numpy(scalars)
+        rows, _ = unique_patches(views_t)
+        # the simulator's views are mostly flat; noise is not (the full way after the first layer)
+        assert (2 * len(rows) < len(views) * 441) == (views is not noise)
+        full1 = conv1(patches(views_t), *first_layer)
+        torch.testing.assert_close(conv1_unique(views_t, *first_layer), full1, rtol=1e-6, atol=1e-6)
+        with torch.no_grad():
+            pre1 = full1.reshape(len(views), 441, 3, -1).permute(2, 0, 1, 3)
+            expected = after_conv1(pre1, scalars_t.expand(3, *scalars_t.shape), params, squash=False)
+            got = forward_distinct(views_t, scalars_t, params, first_layer, conv2_matrices(params))
+        for a, b in zip(got, expected):
+            assert a.shape == (3, len(views), 2)
+            torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-6)
 
 
 @pytest.mark.parametrize("terminal, max_grad_norm, cost, sigma, lam, local_lr", [

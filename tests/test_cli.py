@@ -58,9 +58,19 @@ def test_bench_policy_times_an_ensemble_as_driven_and_joined(tmp_path):
     assert report["as_driven_calls_per_s"] > 0 and report["joined_calls_per_s"] > 0
     assert report["as_driven_ms_per_car"] == pytest.approx(1000.0 / report["as_driven_calls_per_s"] / 3, rel=0.01)
     assert report["platform"]["torch_cpu_capability"] == torch.backends.cpu.get_cpu_capability()  # what ran
+    assert report["views"] == "simulator" and report["scenario"] == "hard"
+    assert 0 < report["distinct_patch_fraction"] < 0.5  # a simulator's views are mostly flat
+    assert report["full_product_calls_per_s"] > 0 and report["speedup_over_full_product"] > 0
+    noise = crossway("bench", "policy", "--checkpoint", str(path), "--seconds", "0.5", "--cars", "2", "--views",
+                     "noise", "--json")
+    assert noise.returncode == 0, noise.stderr
+    assert json.loads(noise.stdout)["distinct_patch_fraction"] == 1.0
     refused = crossway("bench", "policy", "--checkpoint", str(tmp_path / "missing.pt"))
     assert refused.returncode == 2
     assert "no checkpoint file" in refused.stderr and "Traceback" not in refused.stderr
+    too_many = crossway("bench", "policy", "--checkpoint", str(path), "--cars", "9")
+    assert too_many.returncode == 2
+    assert "hard has only 8 lanes" in too_many.stderr and "Traceback" not in too_many.stderr
 
 def test_bench_actor_and_learner_print_json():
     actor = crossway("bench", "actor", "--scenario", "easy", "--seconds", "2", "--update-interval", "5", "--json",
