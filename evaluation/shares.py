@@ -96,17 +96,19 @@ def unpack(reports: list[tuple[Path, dict]], body: str, needed: str, name: str) 
     return parts
 
 
-def check_same_protocol(parts: list[tuple[Path, dict]], keys: tuple[str, ...]) -> None:
+def check_same_protocol(parts: list[tuple[Path, dict]], keys: tuple[str, ...], defaults: dict | None = None) -> None:
     """Refuses parts (report path, its meta) that differ in any of ``keys`` or in the checkpoint
-    they evaluated (by SHA-256 where both record it, else by path)."""
+    they evaluated (by SHA-256 where both record it, else by path). A key a report lacks takes its
+    value from ``defaults`` (the scripted driver's options: one added later defaults to what the
+    code did before it, so a report older than the option ran with that value), else None."""
     if len(parts) < 2:
         raise ValueError("merge needs two or more runs")
     first_path, first = parts[0]
     for path, meta in parts[1:]:
         for key in keys:
-            if meta.get(key) != first.get(key):
-                raise ValueError(f"{path} and {first_path} ran other protocols: {key} "
-                                 f"{meta.get(key)!r} against {first.get(key)!r}")
+            ours, theirs = protocol_value(meta, key, defaults), protocol_value(first, key, defaults)
+            if ours != theirs:
+                raise ValueError(f"{path} and {first_path} ran other protocols: {key} {ours!r} against {theirs!r}")
         digests = (meta.get("checkpoint_sha256"), first.get("checkpoint_sha256"))
         if None not in digests and digests[0] != digests[1]:
             raise ValueError(f"{path} and {first_path} evaluated other checkpoints (SHA-256 {digests[0][:12]} "
@@ -133,10 +135,16 @@ def check_contiguous(ranges: list[tuple[Path, tuple[int, int], bool]], per: str 
     return stop
 
 
-def merged_meta(parts: list[tuple[Path, dict]], keys: tuple[str, ...], command: str) -> dict:
+def protocol_value(meta: dict, key: str, defaults: dict | None = None):
+    """``meta[key]``; for a report older than the key, its value in ``defaults`` (else None)."""
+    return meta[key] if key in meta else (defaults or {}).get(key)
+
+
+def merged_meta(parts: list[tuple[Path, dict]], keys: tuple[str, ...], command: str,
+                defaults: dict | None = None) -> dict:
     """What a joined report's meta shares with its parts, and what it adds up from them."""
     first = parts[0][1]
-    meta = {key: first.get(key) for key in keys}
+    meta = {key: protocol_value(first, key, defaults) for key in keys}
     meta.update({
         "checkpoint": first.get("checkpoint"),
         "checkpoint_sha256": next((m.get("checkpoint_sha256") for _, m in parts if m.get("checkpoint_sha256")), None),

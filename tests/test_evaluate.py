@@ -733,7 +733,8 @@ def test_right_of_way_shares_merge_into_the_whole_test(tmp_path, monkeypatch):
         (tmp_path / "second" / "right-of-way-easy.md").read_text()
     old = json.loads((tmp_path / "first" / "right-of-way-easy.json").read_text())  # as written before --share
     for key in ("jobs", "protocol_jobs", "protocol_episodes", "share", "no_infraction_episodes",
-                "no_seen_infraction_episodes", "platform"):  # nor, before session 28, its machine
+                "no_seen_infraction_episodes", "platform",  # nor, before session 28, its machine
+                "scripted_patience_s", "scripted_blocker_patience_s"):  # nor options added later (the defaults)
         del old[key]
     (tmp_path / "old-right-of-way-easy.json").write_text(json.dumps(old))
     (tmp_path / "old").mkdir()
@@ -763,6 +764,11 @@ def test_right_of_way_shares_merge_into_the_whole_test(tmp_path, monkeypatch):
     (tmp_path / "table1" / "table1-easy.json").write_text("{}")
     with pytest.raises(ValueError, match="different protocols"):
         merge_reports([tmp_path / "first", tmp_path / "table1"], tmp_path / "refused", "merge")
+    del old["scripted_sight"]  # a missing key is its default ("full" sight), not this run's "view"
+    (tmp_path / "no-sight").mkdir()
+    (tmp_path / "no-sight" / "right-of-way-easy.json").write_text(json.dumps(old))
+    with pytest.raises(ValueError, match="scripted_sight None against 'view'"):
+        merge_reports([tmp_path / "second", tmp_path / "no-sight"], tmp_path / "refused", "merge")
     assert not (tmp_path / "refused").exists()
     run("one-of-three", share=(2, 3))
     short = merge_reports([tmp_path / "old", tmp_path / "one-of-three"], tmp_path / "short", "merge")
