@@ -296,7 +296,7 @@ def test_acting_on_distinct_patches_and_windows_gives_the_full_networks_outputs(
     rounding, for one car and for several; noise views (few equal patches) go the full way after
     the first layer and give the same outputs too."""
     from algo.policy import ensemble, member_weights
-    from algo.stacked import conv1_unique, conv2_matrices, forward_distinct
+    from algo.stacked import conv2_matrices, forward_distinct
     from evaluation.policy import PolicyDriver
 
     torch.manual_seed(7)
@@ -317,11 +317,12 @@ def test_acting_on_distinct_patches_and_windows_gives_the_full_networks_outputs(
     for views, scalars in ((result.views[active], result.scalars[active]), (result.views[active[:1]],
                            result.scalars[active[:1]]), (noise, result.scalars[active[:3]])):
         views_t, scalars_t = torch.from_numpy(np.ascontiguousarray(views)), torch.from_numpy(scalars)
-        rows, _ = unique_patches(views_t)
+        rows, inverse = unique_patches(views_t)
         # the simulator's views are mostly flat; noise is not (the full way after the first layer)
         assert (2 * len(rows) < len(views) * 441) == (views is not noise)
         full1 = conv1(patches(views_t), *first_layer)
-        torch.testing.assert_close(conv1_unique(views_t, *first_layer), full1, rtol=1e-6, atol=1e-6)
+        distinct1 = torch.addmm(first_layer[1], rows, first_layer[0])[inverse].reshape(full1.shape)
+        torch.testing.assert_close(distinct1, full1, rtol=1e-6, atol=1e-6)  # the first layer on distinct rows
         with torch.no_grad():
             pre1 = full1.reshape(len(views), 441, 3, -1).permute(2, 0, 1, 3)
             expected = after_conv1(pre1, scalars_t.expand(3, *scalars_t.shape), params, squash=False)
