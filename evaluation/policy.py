@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from algo.policy import (ACTION_SCALE, Policy, PolicyConfig, ensemble_members, load_policy, member_weights, require_views,
-                         save_atomically)
+from algo.policy import (ACTION_SCALE, Policy, PolicyConfig, ensemble_members, load_policy, member_weights,
+                         require_views, save_atomically)
 from algo.stacked import conv2_matrices, first_layer_matrix, forward_distinct, forward_full
 
 
@@ -47,9 +47,10 @@ class PolicyDriver:
     about twice as fast on a CPU as its convolution modules for these layer shapes). A network
     that splits into K equal blocks (an output ensemble, ``algo.policy.ensemble``) runs as K
     weight sets at once, whose outputs before the tanh add up: the same function without the
-    dense layers' zero blocks. A network wider than one of the paper's sizes (an ensemble) multiplies
-    only the distinct patches and windows of the views (``algo.stacked.forward_distinct``). An ensemble with a ``caution`` (``algo.policy.Caution``) takes
-    its acceleration as the members' mean minus that many standard deviations of their votes.
+    dense layers' zero blocks. A network wider than one of the paper's sizes (an ensemble)
+    multiplies only the distinct patches and windows of the views (``algo.stacked.forward_distinct``).
+    An ensemble with a ``caution`` (``algo.policy.Caution``) takes its acceleration as the members'
+    mean minus that many standard deviations of their votes.
     """
 
     def __init__(self, sim, policy: Policy, sigma: float = 0.0, seed: int | None = None,

@@ -77,9 +77,9 @@ def add_parser(subparsers) -> None:
             "cars on the road at each step; default) or noise (--views noise, where no two patches are "
             "equal: the slowest case). A network no wider than one of the paper's sizes is driven with "
             "every patch multiplied. Also timed for comparison: 'full_product', every patch multiplied "
-            "(the driver before session 39, and still for one network), and for a checkpoint that splits into equal members (an "
-            "output ensemble, docs/scripts/ensemble.py) 'joined', the one joined network with its zero "
-            "blocks multiplied. Pinned to one core, one torch thread."
+            "(the driver before session 39, and still for one network), and for a checkpoint that "
+            "splits into equal members (an output ensemble, docs/scripts/ensemble.py) 'joined', the "
+            "one joined network with its zero blocks multiplied. Pinned to one core, one torch thread."
         ),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
@@ -227,6 +227,7 @@ def run_policy_bench(args) -> int:
                                      rng.uniform(0, 5, args.cars)]).astype(np.float32)) for _ in range(4)]
     driver = PolicyDriver(None, policy)
     k = driver.members
+
     def full_product(views, scalars):  # every patch through the first layer, F.conv2d after it
         with torch.no_grad():
             return forward_full(torch.from_numpy(views), torch.from_numpy(np.ascontiguousarray(scalars, np.float32)),
