@@ -21,8 +21,9 @@ neighbouring cars act in one call. Evaluation, which needs no gradient, acts wit
 and the distinct 3x3 windows of patches (an output ensemble's forward pass about twice as fast).
 
 Weights stay in ``Policy``'s layout and names (``acc.conv1.weight`` and so on), with a leading
-dimension for stacked weight sets, so gradients go to the learner unchanged. Pixel values stay 0..255 in the patches; the 1/255 scale of
-``algo.policy.preprocess`` is folded into the first layer's weights.
+dimension for stacked weight sets, so gradients go to the learner unchanged. Pixel values stay
+0..255 in the patches; the 1/255 scale of ``algo.policy.preprocess`` is folded into the first
+layer's weights.
 """
 
 from __future__ import annotations
