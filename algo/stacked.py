@@ -31,7 +31,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from algo.policy import VIEW_SHAPE, first_scalars, scale_scalars
+from algo.policy import CONV2_CELLS, VIEW_SHAPE, first_scalars, scale_scalars
 
 HEADS = ("acc", "sa")
 PATCH = 4  # first-layer kernel and stride [px]
@@ -167,8 +167,7 @@ def forward_distinct(views: torch.Tensor, scalars: torch.Tensor, params: dict[st
     x = out1.index_select(0, distinct.flatten()).view(len(distinct), 9, 2 * b, c1)
     x = x.permute(2, 0, 1, 3).reshape(2 * b, len(distinct), 9 * c1)  # per group: (kernel row, column, channel)
     h2 = torch.relu_(torch.baddbmm(second_layer[1], x, second_layer[0]))  # [2B, U2, C2]
-    cells = inverse2.numel() // max(n, 1)  # 100
-    h2 = h2[:, inverse2].view(b, 2, n, cells, -1).transpose(3, 4).reshape(b, 2, n, -1)  # channel-major, as Policy
+    h2 = h2[:, inverse2].view(b, 2, n, CONV2_CELLS, -1).transpose(3, 4).reshape(b, 2, n, -1)  # channel-major, as Policy
     read = params["acc.hidden.weight"].shape[-1] - h2.shape[-1]  # 2, or 3 with the standing-time input
     inputs = first_scalars(scale_scalars(scalars), read).expand(b, n, read)
     mus, values = [], []

@@ -340,8 +340,6 @@ def merged_from_lines(parts: list[dict]) -> str:
 
 # what every part of one test must share for ``merge_runs`` to join them
 SAME_PROTOCOL = ("scenario", "seed", "episodes_per_job", "view_extent_m", "view_shift_m", *DriverOptions().record())
-# what a report older than a scripted driver option ran with (evaluation.shares.check_same_protocol)
-DRIVER_DEFAULTS = DriverOptions().record()
 COUNTS = ("infractions", "infractions_seen_in_time", "infractions_offender_crashed")
 
 
@@ -364,7 +362,7 @@ def merge_runs(reports: list, out_dir, command: str) -> dict:
     for path, record in reports:
         if not all(key in record for key in ("episodes", "no_infraction", *COUNTS)):
             raise ValueError(f"{path}: not a right-of-way report")
-    check_same_protocol(reports, SAME_PROTOCOL, DRIVER_DEFAULTS)
+    check_same_protocol(reports, SAME_PROTOCOL)
     parts = sorted(reports, key=lambda part: jobs_of(part[1]))
     stop = check_contiguous([(path, jobs_of(r), r["episodes"] % r.get("episodes_per_job", CHUNK_EPISODES) != 0)
                              for path, r in parts])
@@ -381,7 +379,7 @@ def merge_runs(reports: list, out_dir, command: str) -> dict:
         for reason, count in r.get("agent_end_reasons", {}).items():
             reasons[reason] = reasons.get(reason, 0) + count
     counts["agent_end_reasons"] = reasons
-    meta = merged_meta(parts, SAME_PROTOCOL, command, DRIVER_DEFAULTS)
+    meta = merged_meta(parts, SAME_PROTOCOL, command)
     last_protocol_jobs = parts[-1][1].get("protocol_jobs", stop)
     meta.update({"jobs": [0, stop], "protocol_jobs": stop, "protocol_episodes": counts["episodes"],
                  "jobs_not_joined": max(0, last_protocol_jobs - stop),

@@ -14,6 +14,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from simcore.controller import DriverOptions
+
+# what a report older than a scripted driver option ran with: an option added later defaults to
+# what the code did before it (``protocol_value``)
+DRIVER_DEFAULTS = DriverOptions().record()
+
 # report file patterns, by protocol: one of them in each output folder given to merge
 KINDS = {"table1": "table1-*.json", "right-of-way": "right-of-way-*.json", "ttc": "ttc-comparison.json"}
 
@@ -96,17 +102,15 @@ def unpack(reports: list[tuple[Path, dict]], body: str, needed: str, name: str) 
     return parts
 
 
-def check_same_protocol(parts: list[tuple[Path, dict]], keys: tuple[str, ...], defaults: dict | None = None) -> None:
-    """Refuses parts (report path, its meta) that differ in any of ``keys`` or in the checkpoint
-    they evaluated (by SHA-256 where both record it, else by path). A key a report lacks takes its
-    value from ``defaults`` (the scripted driver's options: one added later defaults to what the
-    code did before it, so a report older than the option ran with that value), else None."""
+def check_same_protocol(parts: list[tuple[Path, dict]], keys: tuple[str, ...]) -> None:
+    """Refuses parts (report path, its meta) that differ in any of ``keys`` (as ``protocol_value``
+    reads them) or in the checkpoint they evaluated (by SHA-256 where both record it, else by path)."""
     if len(parts) < 2:
         raise ValueError("merge needs two or more runs")
     first_path, first = parts[0]
     for path, meta in parts[1:]:
         for key in keys:
-            ours, theirs = protocol_value(meta, key, defaults), protocol_value(first, key, defaults)
+            ours, theirs = protocol_value(meta, key), protocol_value(first, key)
             if ours != theirs:
                 raise ValueError(f"{path} and {first_path} ran other protocols: {key} {ours!r} against {theirs!r}")
         digests = (meta.get("checkpoint_sha256"), first.get("checkpoint_sha256"))
@@ -135,16 +139,16 @@ def check_contiguous(ranges: list[tuple[Path, tuple[int, int], bool]], per: str 
     return stop
 
 
-def protocol_value(meta: dict, key: str, defaults: dict | None = None):
-    """``meta[key]``; for a report older than the key, its value in ``defaults`` (else None)."""
-    return meta[key] if key in meta else (defaults or {}).get(key)
+def protocol_value(meta: dict, key: str):
+    """``meta[key]``; for a report older than a scripted driver option, the option's default
+    (``DRIVER_DEFAULTS``), else None."""
+    return meta[key] if key in meta else DRIVER_DEFAULTS.get(key)
 
 
-def merged_meta(parts: list[tuple[Path, dict]], keys: tuple[str, ...], command: str,
-                defaults: dict | None = None) -> dict:
+def merged_meta(parts: list[tuple[Path, dict]], keys: tuple[str, ...], command: str) -> dict:
     """What a joined report's meta shares with its parts, and what it adds up from them."""
     first = parts[0][1]
-    meta = {key: protocol_value(first, key, defaults) for key in keys}
+    meta = {key: protocol_value(first, key) for key in keys}
     meta.update({
         "checkpoint": first.get("checkpoint"),
         "checkpoint_sha256": next((m.get("checkpoint_sha256") for _, m in parts if m.get("checkpoint_sha256")), None),

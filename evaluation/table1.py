@@ -410,8 +410,6 @@ def peek(out_dir: Path) -> str:
 # what every part of one protocol must share for ``merge_runs`` to join them (meta keys)
 SAME_PROTOCOL = ("scenario", "seed", "delays_max_s", "protocol_delays_max_s", "sign_change_interval_s",
                  "sign_change_restart", *DriverOptions().record(), "scripted_sight_m", "scripted_sight_shift_m")
-# what a report older than a scripted driver option ran with (evaluation.shares.check_same_protocol)
-DRIVER_DEFAULTS = DriverOptions().record()
 
 
 def jobs_of(meta: dict) -> tuple[int, int]:
@@ -429,7 +427,7 @@ def merge_runs(reports: list[tuple[Path, dict]], out_dir: Path, command: str) ->
     checkpoints or seeds, parts that overlap or leave a gap, before writing anything.
     ``reports``: (path, its parsed JSON) per part (``evaluation.shares.merge_reports``)."""
     parts = unpack(reports, "tests", "episodes_per_test", "Table I")
-    check_same_protocol([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL, DRIVER_DEFAULTS)
+    check_same_protocol([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL)
     parts.sort(key=lambda part: jobs_of(part[1]))
     ranges = [(path, jobs_of(meta), meta["episodes_per_test"]) for path, meta, _ in parts]
     stop = check_contiguous([(path, (first_job, stop_job), episodes != (stop_job - first_job) * CHUNK_EPISODES)
@@ -443,7 +441,7 @@ def merge_runs(reports: list[tuple[Path, dict]], out_dir: Path, command: str) ->
     table = summarise(results)
     episodes = sum(meta["episodes_per_test"] for _, meta, _ in parts)
     last_protocol_jobs = parts[-1][1].get("protocol_jobs", stop)  # runs before --share end their own protocol
-    meta = merged_meta([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL, command, DRIVER_DEFAULTS)
+    meta = merged_meta([(path, meta) for path, meta, _ in parts], SAME_PROTOCOL, command)
     meta.update({
         "episodes_per_test": episodes, "jobs": [0, stop], "protocol_jobs": stop,
         "protocol_episodes_per_test": episodes,
