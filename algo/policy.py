@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from algo.braking import EmergencyBraking, emergency_braking_from
 from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING
 from simcore.rightofway import SIGN_NAMES
 from simcore.simulator import HISTORY
@@ -193,6 +194,9 @@ class Policy(nn.Module):
         # an output ensemble's rule for braking where its members disagree (``Caution``); applied
         # where the members run side by side (evaluation.policy.PolicyDriver), not by ``forward``
         self.caution: Caution | None = None
+        # a rule braking for a car in the path ahead, read from the views (``algo.braking``); applied
+        # by evaluation.policy.PolicyDriver, not by ``forward``
+        self.emergency_braking: EmergencyBraking | None = None
         self.acc = SubModule(config)
         self.sa = SubModule(config)
 
@@ -413,7 +417,9 @@ def load_policy(checkpoint: str | Path) -> Policy:
     A file that holds ``members`` (an output ensemble as docs/scripts/ensemble.py writes it, each
     member's weights and sizes) gives the one network ``ensemble`` joins them into: the file keeps
     only the members, not the joined network's zero blocks, and may hold a ``caution`` entry
-    (``Caution``), which the returned network carries for ``evaluation.policy.PolicyDriver``."""
+    (``Caution``), which the returned network carries for ``evaluation.policy.PolicyDriver``. Any
+    checkpoint may hold an ``emergency_braking`` entry (``algo.braking.EmergencyBraking``), carried
+    the same way."""
     path = Path(checkpoint)
     if not path.is_file():
         raise ValueError(f"no checkpoint file {str(path)!r}")
@@ -430,8 +436,12 @@ def load_policy(checkpoint: str | Path) -> Policy:
             if len(members) < 2:
                 raise ValueError(f"{path}: caution needs at least two members to disagree, it has one")
             joined.caution = caution_from(str(path), state["caution"])
+        joined.emergency_braking = emergency_braking_from(str(path), state.get("emergency_braking"))
         return joined
-    return _policy_from(str(path), state)
+    policy = _policy_from(str(path), state)
+    if isinstance(state, dict):
+        policy.emergency_braking = emergency_braking_from(str(path), state.get("emergency_braking"))
+    return policy
 
 
 def _policy_from(source: str, state) -> Policy:

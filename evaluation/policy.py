@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from algo.braking import EmergencyBraking
 from algo.policy import (ACTION_SCALE, Policy, PolicyConfig, ensemble_members, load_policy, member_weights,
                          require_views, save_atomically)
 from algo.stacked import conv2_matrices, first_layer_matrix, forward_distinct, forward_full
@@ -25,8 +26,12 @@ def check_checkpoint(checkpoint: str | Path, spec) -> None:
                   "evaluate it on a scenario file whose [views] table matches (docs/simulator.md)")
 
 
-def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Path:
-    """Write only what evaluation needs (network sizes, weights, provenance): a small file for models/."""
+def export_policy(checkpoint: str | Path, out: str | Path, note: str = "",
+                  emergency_braking: EmergencyBraking | None | bool = True) -> Path:
+    """Write only what evaluation needs (network sizes, weights, provenance): a small file for models/.
+
+    ``emergency_braking``: True keeps the checkpoint's own rule (``algo.braking``), a rule replaces
+    it, None or False leaves it out."""
     policy = load_policy(checkpoint)
     state = torch.load(Path(checkpoint), weights_only=False, map_location="cpu")
     out = Path(out)
@@ -35,6 +40,9 @@ def export_policy(checkpoint: str | Path, out: str | Path, note: str = "") -> Pa
                else {"policy": policy.state_dict(), "policy_config": state["policy_config"]})
     exported = {**weights, "version": state.get("version"), "agent_steps": state.get("agent_steps"),
                 "run_id": state.get("run_id"), "note": note}
+    rule = policy.emergency_braking if emergency_braking is True else (emergency_braking or None)
+    if rule is not None:
+        exported["emergency_braking"] = rule.record()
     if "views" in state:  # a file without the record reads as the paper's views (algo.policy.policy_views)
         exported["views"] = state["views"]
     return save_atomically(exported, out)
@@ -50,7 +58,9 @@ class PolicyDriver:
     dense layers' zero blocks. A network wider than one of the paper's sizes (an ensemble)
     multiplies only the distinct patches and windows of the views (``algo.stacked.forward_distinct``).
     An ensemble with a ``caution`` (``algo.policy.Caution``) takes its acceleration as the members'
-    mean minus that many standard deviations of their votes.
+    mean minus that many standard deviations of their votes. A network with an
+    ``emergency_braking`` rule (``algo.braking``) brakes for a car in a car's path ahead as its views
+    show it, whatever the network says; ``braked_car_steps`` counts where it did.
     """
 
     def __init__(self, sim, policy: Policy, sigma: float = 0.0, seed: int | None = None,
@@ -79,6 +89,8 @@ class PolicyDriver:
         # grouping equal patches pays once the first layer is wider than one network of the paper's
         # sizes ('crossway bench policy': about 1.9x for nine members, level for one)
         self._distinct = matrix.shape[1] > 2 * PolicyConfig().conv1_channels
+        self.emergency_braking = policy.emergency_braking
+        self.braked_car_steps = 0  # car-steps where the emergency braking overrode the network
 
     def heads(self, views: np.ndarray, scalars: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Means and values [B, 2] (acc, sa) for uint8 views [B, 16, 84, 84] and speeds [B, 2] m/s."""
@@ -114,4 +126,9 @@ class PolicyDriver:
         if self.sigma > 0:
             means = means + self.sigma * self._rng.standard_normal(means.shape)
         actions[active] = np.clip(means, -1.0, 1.0) * ACTION_SCALE
+        if self.emergency_braking is not None:
+            views = self.sim.spec.views
+            actions[active, 0], braked = self.emergency_braking.apply(
+                result.views[active], result.scalars[active, 0], actions[active, 0], views.extent_m, views.shift_m)
+            self.braked_car_steps += int(braked.sum())
         return actions, values

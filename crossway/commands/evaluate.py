@@ -136,6 +136,19 @@ def add_parser(subparsers) -> None:
     export.add_argument("--checkpoint", type=Path, required=True, help="learner checkpoint")
     export.add_argument("--out", type=Path, required=True, help="file to write, e.g. models/easy.pt")
     export.add_argument("--note", default="", help="free text stored with the weights (how they were trained)")
+    braking = export.add_mutually_exclusive_group()
+    braking.add_argument("--emergency-braking", action="store_true",
+                         help="store a rule that brakes for a car on a car's path ahead, read from its views, "
+                              "on top of the network (not in the paper; algo/braking.py, docs/evaluation.md); "
+                              "every evaluate command applies it. Default: keep the checkpoint's own rule, if any")
+    braking.add_argument("--no-emergency-braking", action="store_true",
+                         help="leave out the checkpoint's emergency-braking rule")
+    export.add_argument("--emergency-margin", type=float, default=None, metavar="M",
+                        help="with --emergency-braking: gap kept to the car in the path [m] (default 1.5)")
+    export.add_argument("--emergency-reaction", type=float, default=None, metavar="S",
+                        help="with --emergency-braking: time the trigger allows before braking starts [s] (default 0.5)")
+    export.add_argument("--emergency-deceleration", type=float, default=None, metavar="A",
+                        help="with --emergency-braking: the braking the trigger distance assumes [m/s^2] (default 2)")
     export.set_defaults(func=run_export_command)
 
 
@@ -373,8 +386,23 @@ def run_ttc_command(args) -> int:
 def run_export_command(args) -> int:
     from evaluation.policy import export_policy
 
+    from algo.braking import EmergencyBraking
+    from algo.policy import load_policy
+
     if not args.out.parent.is_dir():
         raise ValueError(f"--out: directory {str(args.out.parent)!r} does not exist")
-    path = export_policy(args.checkpoint, args.out, args.note)
-    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
+    settings = {"margin_m": args.emergency_margin, "reaction_s": args.emergency_reaction,
+                "deceleration_mps2": args.emergency_deceleration}
+    given = {k: v for k, v in settings.items() if v is not None}
+    if given and not args.emergency_braking:
+        raise ValueError("--emergency-margin, --emergency-reaction and --emergency-deceleration go with "
+                         "--emergency-braking")
+    rule: EmergencyBraking | bool | None = True  # keep the checkpoint's own
+    if args.emergency_braking:
+        rule = EmergencyBraking(**given)
+    elif args.no_emergency_braking:
+        rule = None
+    path = export_policy(args.checkpoint, args.out, args.note, emergency_braking=rule)
+    kept = load_policy(path).emergency_braking
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)" + (f"; {kept.describe()}" if kept else ""))
     return 0
