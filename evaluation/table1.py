@@ -119,10 +119,14 @@ def run_test(spec: TestSpec, progress=None) -> dict:
     reset_s = sim.time_s  # when the reset started every lane [s]; later episodes begin after it
     redraw_due_s = dict.fromkeys(started_s, sim.next_sign_change_s)  # slot -> the next redraw when it began [s]
     redraws_s: list[float] = []  # when the signs were redrawn and every lane restarted [s]
+    driver = getattr(act, "__self__", None)  # a PolicyDriver; the scripted driver's act is a plain function
+    braking = getattr(driver, "emergency_braking", None)  # algo.braking: count where it overrode the network
+    car_steps = 0
     done = 0
     while done < spec.episodes:
         next_redraw_s = sim.next_sign_change_s
         result = sim.step(act(result))
+        car_steps += int(result.acted.sum())
         if sim.next_sign_change_s != next_redraw_s:
             redraws_s.append(next_redraw_s)  # when it was due (also when the road stood empty)
         for episode in result.episodes:
@@ -148,10 +152,13 @@ def run_test(spec: TestSpec, progress=None) -> dict:
             redraw_due_s[slot] = sim.next_sign_change_s
     if progress is not None and done % 25:
         progress.put(done % 25)
-    return {"delay_max_s": spec.delay_max_s, "counts": {s: dict(c) for s, c in counts.items()},
-            "speed_sum": dict(speed_sum), "cut_by_redraw": dict(cut),
-            "counts_uncuttable": {s: dict(c) for s, c in uncuttable.items()},
-            "counts_by_start": {k: {s: dict(c) for s, c in v.items()} for k, v in by_start.items()}}
+    report = {"delay_max_s": spec.delay_max_s, "counts": {s: dict(c) for s, c in counts.items()},
+              "speed_sum": dict(speed_sum), "cut_by_redraw": dict(cut),
+              "counts_uncuttable": {s: dict(c) for s, c in uncuttable.items()},
+              "counts_by_start": {k: {s: dict(c) for s, c in v.items()} for k, v in by_start.items()}}
+    if braking is not None:  # car-steps driven, and those where the emergency braking overrode the network
+        report.update(car_steps=car_steps, braked_car_steps=driver.braked_car_steps)
+    return report
 
 
 def add_counts(total: dict[str, dict[str, int]], counts: dict[str, dict[str, int]]) -> None:
@@ -176,6 +183,9 @@ def merge_chunks(parts: list[dict]) -> list[dict]:
         add_counts(test.setdefault("counts_uncuttable", {}), part.get("counts_uncuttable", {}))
         for kind, counts in part.get("counts_by_start", {}).items():  # absent in results kept before session 28
             add_counts(test.setdefault("counts_by_start", {}).setdefault(kind, {}), counts)
+        for key in ("car_steps", "braked_car_steps"):  # only where a policy drove with emergency braking
+            if key in part:
+                test[key] = test.get(key, 0) + part[key]
     return list(merged.values())
 
 
@@ -291,6 +301,18 @@ def markdown_tests(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def markdown_braking(tests: list[dict]) -> str:
+    """How often the policy's emergency braking (``algo.braking``) overrode the network, per test;
+    "" for runs without it."""
+    braked = [t for t in tests if "braked_car_steps" in t]
+    if not braked:
+        return ""
+    cells = ", ".join(f"{t['braked_car_steps'] / max(t['car_steps'], 1):.2%} at {t['delay_max_s']:g} s" for t in braked)
+    steps, total = sum(t["braked_car_steps"] for t in braked), sum(t["car_steps"] for t in braked)
+    return (f"\nThe policy's emergency braking (algo/braking.py) overrode the network in {steps} of {total} "
+            f"car-steps ({steps / max(total, 1):.2%}): {cells}.\n")
+
+
 def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, meta: dict) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = out_dir / f"table1-{scenario}"
@@ -357,6 +379,7 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
                      f"which no redraw could cut ({uncut['all']['episodes']}, all tests pooled), reaches per "
                      f"sign are {cells}.\n")
     page += f"\n## Per test\n\n![reach per test and sign]({png_path.name})\n\n" + markdown_tests(test_rows)
+    page += markdown_braking(tests)
     if len(starts) > 1:
         page += ("\n## By how the episodes began\n\nreset: every lane's first episode in each job of at most "
                  f"{CHUNK_EPISODES} episodes, all lanes at once when the job's simulator starts; ")

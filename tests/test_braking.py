@@ -154,3 +154,21 @@ def test_export_stores_keeps_and_drops_the_rule_and_the_driver_applies_it(tmp_pa
         result = sim.step(actions)
     assert with_rule.braked_car_steps > 0 and changed >= with_rule.braked_car_steps
     assert without.braked_car_steps == 0
+
+
+def test_table1_reports_how_often_the_rule_overrode_the_network(tmp_path):
+    import json
+
+    from algo.policy import Policy, PolicyConfig
+
+    torch.manual_seed(5)
+    checkpoint = tmp_path / "braking.pt"
+    torch.save({"policy": Policy(PolicyConfig()).state_dict(), "policy_config": {},
+                "emergency_braking": EmergencyBraking().record()}, checkpoint)
+    result = crossway("evaluate", "table1", "--checkpoint", str(checkpoint), "--scenario", "hard", "--episodes", "8",
+                      "--sweep-up-to", "10", "--workers", "1", "--out", str(tmp_path / "out"))
+    assert result.returncode == 0, result.stderr
+    test = json.loads((tmp_path / "out" / "table1-hard.json").read_text())["tests"][0]
+    assert 0 < test["braked_car_steps"] < test["car_steps"]
+    page = (tmp_path / "out" / "table1-hard.md").read_text()
+    assert f"overrode the network in {test['braked_car_steps']} of {test['car_steps']} car-steps" in page
