@@ -32,6 +32,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from algo.entries import settings_from_entry
 from simcore.dynamics import DT, MAX_ACCELERATION, VEHICLE_LENGTH
 from simcore.simulator import HISTORY
 from simcore.views import CHANNELS, PATH, VIEW_SIZE_PX
@@ -120,13 +121,4 @@ class EmergencyBraking:
 def emergency_braking_from(source: str, record) -> EmergencyBraking | None:
     """The rule of a checkpoint's ``emergency_braking`` entry (None: no rule); ValueError naming
     ``source`` when the entry is not one."""
-    if record is None:
-        return None
-    if not isinstance(record, dict):
-        raise ValueError(f"{source}: its emergency_braking entry is not a table ({record!r})")
-    try:
-        return EmergencyBraking(**record)
-    except TypeError as error:
-        raise ValueError(f"{source}: its emergency_braking entry does not match this crossway ({error})") from None
-    except ValueError as error:
-        raise ValueError(f"{source}: {error}") from None
+    return None if record is None else settings_from_entry(source, "emergency_braking", EmergencyBraking, record)

@@ -28,6 +28,7 @@ import torch
 from torch import nn
 
 from algo.braking import EmergencyBraking, emergency_braking_from
+from algo.entries import settings_from_entry
 from simcore.dynamics import MAX_ACCELERATION, MAX_STEERING
 from simcore.rightofway import SIGN_NAMES
 from simcore.simulator import HISTORY
@@ -153,14 +154,7 @@ def sign_in_view(views: np.ndarray) -> np.ndarray:
 
 def caution_from(source: str, record) -> Caution:
     """The ``Caution`` of a checkpoint's ``caution`` entry; ValueError naming ``source`` when it is not one."""
-    if not isinstance(record, dict):
-        raise ValueError(f"{source}: its caution entry is not a table ({record!r})")
-    try:
-        return Caution(**record)
-    except TypeError as error:
-        raise ValueError(f"{source}: its caution entry does not match this crossway ({error})") from None
-    except ValueError as error:
-        raise ValueError(f"{source}: {error}") from None
+    return settings_from_entry(source, "caution", Caution, record)
 
 
 class SubModule(nn.Module):
