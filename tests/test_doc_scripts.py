@@ -470,3 +470,63 @@ def test_reset_starts_replays_the_episodes_table1_began_at_each_jobs_reset(tmp_p
         refused = subprocess.run([sys.executable, str(ROOT / "docs/results/reset-starts/reset_starts.py"), *bad_args],
                                  capture_output=True, text=True, timeout=120, cwd=ROOT)
         assert refused.returncode != 0 and message in refused.stderr and not refused.stdout, refused.stderr
+
+
+def test_rule_recall_drives_the_network_alone_and_scores_the_checkpoints_rule(tmp_path):
+    wide = tmp_path / "wide-margin.pt"
+    exported = subprocess.run([sys.executable, "-m", "crossway", "evaluate", "export", "--checkpoint", "models/hard.pt",
+                               "--out", str(wide), "--emergency-braking", "--emergency-margin", "4"],
+                              capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert exported.returncode == 0, exported.stderr
+    plain = _run_script("rule_recall.py", "--checkpoint", "models/hard.pt", "--episodes", "12", "--delay-max", "3")
+    wider = _run_script("rule_recall.py", "--checkpoint", str(wide), "--episodes", "12", "--delay-max", "3")
+    assert plain["rule"] == {"margin_m": 1.5, "reaction_s": 0.5, "deceleration_mps2": 2.0}  # the defaults
+    assert wider["rule"]["margin_m"] == 4.0
+    # the rule is only scored, never applied: both runs drive the same episodes to the same ends
+    assert (plain["car_steps"], plain["outcomes"]) == (wider["car_steps"], wider["outcomes"])
+    assert abs(sum(plain["outcomes"].values()) - 1.0) < 1e-3 and plain["episodes"] >= 12
+    # a wider margin brakes earlier and harder on the same states
+    assert 0.0 < plain["override_share"] <= wider["override_share"] < 1.0
+    assert 0.0 < plain["correction_mps2_per_car_step"] <= wider["correction_mps2_per_car_step"]
+    for report in (plain, wider):
+        assert 0.0 <= report["recall"] <= 1.0
+        assert -3.0 <= report["rule_mean_mps2"] < report["network_mean_mps2"] <= 3.0
+
+
+def test_split_ensemble_writes_members_that_join_again_into_the_same_network(tmp_path):
+    import numpy as np
+    import torch
+
+    from algo.braking import EmergencyBraking
+    from algo.policy import load_policy, preprocess
+
+    first, second = _policy_file(tmp_path / "a.pt", 1), _policy_file(tmp_path / "b.pt", 2, hidden=64)
+    joined = tmp_path / "joined.pt"
+    assert subprocess.run([sys.executable, str(ROOT / "docs/scripts/ensemble.py"), str(joined), str(first),
+                           str(second)], capture_output=True, text=True, timeout=120).returncode == 0
+    state = torch.load(joined, weights_only=False)
+    state["emergency_braking"] = EmergencyBraking(margin_m=2.0).record()
+    torch.save(state, joined)
+    split = subprocess.run([sys.executable, str(ROOT / "docs/scripts/split_ensemble.py"), str(joined),
+                            str(tmp_path / "members")], capture_output=True, text=True, timeout=120)
+    assert split.returncode == 0, split.stderr
+    members = [tmp_path / "members" / f"member-{k}.pt" for k in (1, 2)]
+    assert sorted((tmp_path / "members").iterdir()) == members
+    views, scalars = preprocess(np.random.default_rng(5).integers(0, 256, (3, 16, 84, 84), dtype=np.uint8),
+                                np.array([[float(i), 8.0] for i in range(3)]))
+    with torch.no_grad():
+        for member, original in zip(members, (first, second)):
+            policy = load_policy(member)
+            assert policy.emergency_braking == EmergencyBraking(margin_m=2.0)  # the ensemble's rule goes along
+            for got, want in zip(policy(views, scalars), load_policy(original)(views, scalars)):
+                torch.testing.assert_close(got, want)
+    rejoined = tmp_path / "rejoined.pt"
+    assert subprocess.run([sys.executable, str(ROOT / "docs/scripts/ensemble.py"), str(rejoined),
+                           *map(str, members)], capture_output=True, text=True, timeout=120).returncode == 0
+    with torch.no_grad():
+        for got, want in zip(load_policy(rejoined)(views, scalars), load_policy(joined)(views, scalars)):
+            torch.testing.assert_close(got, want)
+    refused = subprocess.run([sys.executable, str(ROOT / "docs/scripts/split_ensemble.py"), str(first),
+                              str(tmp_path / "none")], capture_output=True, text=True, timeout=120)
+    assert refused.returncode != 0 and "not an output ensemble" in refused.stderr
+    assert not (tmp_path / "none").exists()
