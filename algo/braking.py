@@ -44,27 +44,30 @@ MIN_BRAKING_MPS2 = 1.0  # the least deceleration the rule commands once it acts 
 
 
 @lru_cache(maxsize=8)
-def _geometry(extent_m: float, shift_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per view pixel: its distance from the middle of the ego's front [m], and whether it is
-    searched (ahead of the front by FRONT_CLEARANCE_M, within SEARCH_M of it); [84, 84] each,
-    for a view square ``extent_m`` wide whose centre lies ``shift_m`` ahead of the car
-    (``simcore.views``: the car points up, row 0 is farthest ahead)."""
+def _searched_pixels(extent_m: float, shift_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The view pixels searched for a car (ahead of the ego's front by FRONT_CLEARANCE_M, within
+    SEARCH_M of it), as flat indices into an 84 x 84 plane, and their distances [m] from the middle
+    of the ego's front, for a view square ``extent_m`` wide whose centre lies ``shift_m`` ahead of
+    the car (``simcore.views``: the car points up, row 0 is farthest ahead). About a quarter of
+    the plane at the default sizes."""
     metres_per_px = extent_m / VIEW_SIZE_PX
     centres = (VIEW_SIZE_PX / 2.0 - np.arange(VIEW_SIZE_PX) - 0.5) * metres_per_px
     forward, left = np.meshgrid(centres + shift_m, centres, indexing="ij")
     front = 0.5 * VEHICLE_LENGTH
     distance = np.hypot(np.maximum(forward - front, 0.0), left)
-    searched = (forward > front + FRONT_CLEARANCE_M) & (distance < SEARCH_M)
-    return distance, searched
+    searched = np.flatnonzero((forward > front + FRONT_CLEARANCE_M) & (distance < SEARCH_M))
+    return searched, distance.ravel()[searched]
 
 
 def path_gaps(views: np.ndarray, frame: int, extent_m: float = 50.0, shift_m: float = 0.0) -> np.ndarray:
     """For uint8 views [B, 16, 84, 84]: the distance [m] from each ego's front to the nearest car
     on its path ahead in frame ``frame`` (0 the oldest, 3 the newest); inf where there is none."""
-    distance, searched = _geometry(float(extent_m), float(shift_m))
-    path = views[:, CHANNELS.index("path") * HISTORY + frame] == PATH
-    cars = views[:, CHANNELS.index("obstacles") * HISTORY + frame] != 0
-    return np.where(path & cars & searched, distance, np.inf).min(axis=(1, 2))
+    searched, distance = _searched_pixels(float(extent_m), float(shift_m))
+    if len(views) == 0 or len(searched) == 0:
+        return np.full(len(views), np.inf)
+    planes = views[:, [CHANNELS.index("path") * HISTORY + frame, CHANNELS.index("obstacles") * HISTORY + frame]]
+    path, cars = planes.reshape(len(views), 2, -1)[:, :, searched].transpose(1, 0, 2)
+    return np.where((path == PATH) & (cars != 0), distance, np.inf).min(axis=1)
 
 
 @dataclass(frozen=True)
