@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import collections
 import json
+import sys
 
 import numpy as np
 
@@ -38,8 +39,11 @@ def main() -> None:
     args = parser.parse_args()
 
     sim = Simulator("hard", SimConfig(delay_min_s=0.0, delay_max_s=args.delay_max), seed=args.seed)
-    check_checkpoint(args.checkpoint, sim.spec)
-    policy = load_policy(args.checkpoint)
+    try:
+        check_checkpoint(args.checkpoint, sim.spec)
+        policy = load_policy(args.checkpoint)
+    except ValueError as error:
+        sys.exit(f"rule_recall: {error}")
     rule = policy.emergency_braking or EmergencyBraking()
     policy.emergency_braking = None  # the network alone drives
     driver = PolicyDriver(sim, policy)
@@ -53,7 +57,7 @@ def main() -> None:
         active = np.flatnonzero(sim.learners_present)
         if len(active):
             network = actions[active, 0]
-            ruled, braked = rule.apply(result.views[active], result.scalars[active, 0], network,
+            ruled, _ = rule.apply(result.views[active], result.scalars[active, 0], network,
                                        views.extent_m, views.shift_m)
             overridden = ruled < network - 1e-9
             car_steps += len(active)
