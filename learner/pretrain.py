@@ -115,6 +115,72 @@ def scripted_teacher_changes(config: PretrainConfig) -> list[str]:
     return [name for name in SCRIPTED_TEACHER_FIELDS if getattr(config, name) != getattr(PretrainConfig, name)]
 
 
+def check_config(config: PretrainConfig, name=lambda field: field) -> None:
+    """Refuse settings a run cannot use, before anything is built; ``name(field)`` names a setting in the
+    messages (the ``crossway pretrain`` command passes its flags)."""
+    from simcore.controller import APPROACH_SIGNS
+
+    def finite_positive(value) -> bool:
+        return 0.0 < value < float("inf")  # False for nan
+
+    if not finite_positive(config.minutes):
+        raise ValueError(f"{name('minutes')} must be > 0, got {config.minutes}")
+    if config.rounds < 0:
+        raise ValueError(f"{name('rounds')} must be >= 0, got {config.rounds}")
+    for field in ("steps_per_round", "batch_size", "buffer_samples", "torch_threads"):
+        if getattr(config, field) < 1:
+            raise ValueError(f"{name(field)} must be >= 1, got {getattr(config, field)}")
+    for field in ("reuse", "learning_rate"):
+        if not finite_positive(getattr(config, field)):
+            raise ValueError(f"{name(field)} must be > 0, got {getattr(config, field)}")
+    if not 0.0 <= config.value_coef < float("inf"):
+        raise ValueError(f"{name('value_coef')} must be >= 0, got {config.value_coef}")
+    if not 0.0 < config.gamma <= 1.0:
+        raise ValueError(f"{name('gamma')} must be in (0, 1], got {config.gamma}")
+    if config.teacher_sight not in SIGHTS:
+        raise ValueError(f"{name('teacher_sight')} must be one of {SIGHTS}, got {config.teacher_sight!r}")
+    if config.teacher_approach_mps is not None and not finite_positive(config.teacher_approach_mps):
+        raise ValueError(f"{name('teacher_approach_mps')} must be a speed > 0 m/s, got {config.teacher_approach_mps}")
+    if config.teacher_approach_signs not in APPROACH_SIGNS:
+        raise ValueError(f"{name('teacher_approach_signs')} must be one of {APPROACH_SIGNS}, "
+                         f"got {config.teacher_approach_signs!r}")
+    if config.teacher_approach_signs != "all" and config.teacher_approach_mps is None:
+        raise ValueError(f"{name('teacher_approach_signs')} goes with {name('teacher_approach_mps')}")
+    for field in ("teacher_patience_s", "teacher_blocker_patience_s"):
+        if not getattr(config, field) > 0:
+            raise ValueError(f"{name(field)} must be > 0 s ('inf': never), got {getattr(config, field)}")
+    if not config.teacher_half_life > 0:
+        raise ValueError(f"{name('teacher_half_life')} must be > 0 samples, got {config.teacher_half_life}")
+    if not config.brake_weight > 0:
+        raise ValueError(f"{name('brake_weight')} must be > 0, got {config.brake_weight}")
+    if not finite_positive(config.blocker_weight):
+        raise ValueError(f"{name('blocker_weight')} must be > 0, got {config.blocker_weight}")
+    if config.blocker_weight != 1.0 and not config.teacher_brake_for_blockers:
+        raise ValueError(f"{name('blocker_weight')} weighs the teacher's braking for blockers: it goes with "
+                         f"{name('teacher_brake_for_blockers')}")
+    if not finite_positive(config.patience_weight):
+        raise ValueError(f"{name('patience_weight')} must be > 0, got {config.patience_weight}")
+    if config.patience_weight != 1.0 and config.teacher_patience_s == float("inf"):
+        raise ValueError(f"{name('patience_weight')} weighs the teacher's going once its patience ran out: it "
+                         f"needs a finite {name('teacher_patience_s')}")
+    if config.acceleration_loss not in ACCELERATION_LOSSES:
+        raise ValueError(f"{name('acceleration_loss')} must be one of {ACCELERATION_LOSSES}, "
+                         f"got {config.acceleration_loss!r}")
+    if not 0.0 <= config.priority_exponent < float("inf"):
+        raise ValueError(f"{name('priority_exponent')} must be >= 0 (0: uniform sampling), "
+                         f"got {config.priority_exponent}")
+    if config.average_half_life is not None and not finite_positive(config.average_half_life):
+        raise ValueError(f"{name('average_half_life')} must be > 0 Adam steps, got {config.average_half_life}")
+    if config.delay_max_s is not None and not 0.0 <= config.delay_max_s < float("inf"):
+        raise ValueError(f"{name('delay_max_s')} must be >= 0 s, got {config.delay_max_s}")
+    if config.network is not None and (len(config.network) != 3 or min(config.network) < 1):
+        raise ValueError(f"{name('network')} must be three sizes >= 1, got {config.network}")
+    changed = scripted_teacher_changes(config)
+    if config.teacher_checkpoint is not None and changed:
+        raise ValueError(f"{', '.join(name(field) for field in changed)} shape the scripted teacher; a policy "
+                         f"teacher ({name('teacher_checkpoint')}) takes none of them")
+
+
 def fixed_policy_driver(sim, checkpoint: Path, role: str):
     """A trained policy driving ``sim`` as ``crossway evaluate`` drives it (Gaussian means, an
     ensemble's members side by side, its caution applied); ValueError, naming its ``role``, when it
@@ -164,47 +230,15 @@ class Pretrainer:
         from simcore.controller import DriverOptions, scripted_driver
         from simcore.simulator import SimConfig, Simulator
 
-        if (config.minutes <= 0 or config.rounds < 0 or config.steps_per_round < 1 or config.batch_size < 1
-                or config.reuse <= 0):
-            raise ValueError("minutes, steps_per_round, batch_size and reuse must be positive")
-        if config.teacher_sight not in SIGHTS:
-            raise ValueError(f"teacher_sight must be one of {SIGHTS}, got {config.teacher_sight!r}")
-        if config.teacher_approach_mps is not None and not 0.0 < config.teacher_approach_mps < float("inf"):
-            raise ValueError(f"teacher_approach_mps must be > 0 m/s or None, got {config.teacher_approach_mps}")
-        teacher_options = DriverOptions(  # refuses an unknown approach_signs before anything is built
+        check_config(config)
+        teacher_options = DriverOptions(
             sight=config.teacher_sight, approach_speed_mps=config.teacher_approach_mps,
             approach_signs=config.teacher_approach_signs, brake_for_blockers=config.teacher_brake_for_blockers,
             wait_outside_zones=config.teacher_wait_outside_zones, break_wait_cycles=config.teacher_break_wait_cycles,
             patience_s=config.teacher_patience_s, blocker_patience_s=config.teacher_blocker_patience_s)
-        if not config.teacher_half_life > 0:
-            raise ValueError(f"teacher_half_life must be > 0 samples, got {config.teacher_half_life}")
-        if not config.brake_weight > 0:
-            raise ValueError(f"brake_weight must be > 0, got {config.brake_weight}")
-        if not 0.0 < config.blocker_weight < float("inf"):
-            raise ValueError(f"blocker_weight must be > 0, got {config.blocker_weight}")
-        if config.blocker_weight != 1.0 and not config.teacher_brake_for_blockers:
-            raise ValueError("blocker_weight weighs the teacher's braking for blockers: it needs "
-                             "teacher_brake_for_blockers")
-        if config.acceleration_loss not in ACCELERATION_LOSSES:
-            raise ValueError(f"acceleration_loss must be one of {ACCELERATION_LOSSES}, got {config.acceleration_loss!r}")
-        if not 0.0 < config.patience_weight < float("inf"):
-            raise ValueError(f"patience_weight must be > 0, got {config.patience_weight}")
-        if config.patience_weight != 1.0 and config.teacher_patience_s == float("inf"):
-            raise ValueError("patience_weight weighs the teacher's going once its patience ran out: it needs a "
-                             "finite teacher_patience_s")
-        if not 0.0 <= config.priority_exponent < float("inf"):
-            raise ValueError(f"priority_exponent must be >= 0 (0: uniform), got {config.priority_exponent}")
-        if config.average_half_life is not None and not 0.0 < config.average_half_life < float("inf"):
-            raise ValueError(f"average_half_life must be > 0 Adam steps or None, got {config.average_half_life}")
-        changed = scripted_teacher_changes(config)
-        if config.teacher_checkpoint is not None and changed:
-            raise ValueError(f"{', '.join(changed)} shape the scripted teacher; a policy teacher "
-                             f"(teacher_checkpoint) takes none of them")
         self.config = config
         torch.manual_seed(config.seed)
         torch.set_num_threads(config.torch_threads)
-        if config.network is not None and min(config.network) < 1:
-            raise ValueError(f"network sizes must be >= 1, got {config.network}")
         sizes = {} if config.network is None else dict(zip(("conv1_channels", "conv2_channels", "hidden"),
                                                             config.network))
         if config.init_from is not None:

@@ -140,15 +140,16 @@ def add_parser(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-# the options behind learner.pretrain.SCRIPTED_TEACHER_FIELDS, for messages
-SCRIPTED_TEACHER_FLAGS = {"teacher_sight": "--teacher-sight", "teacher_approach_mps": "--teacher-approach-speed",
-                          "teacher_approach_signs": "--teacher-approach-signs",
-                          "teacher_brake_for_blockers": "--teacher-brake-for-blockers",
-                          "teacher_wait_outside_zones": "--teacher-wait-outside-zones",
-                          "teacher_break_wait_cycles": "--teacher-break-wait-cycles",
-                          "teacher_patience_s": "--teacher-patience",
-                          "teacher_blocker_patience_s": "--teacher-blocker-patience",
-                          "blocker_weight": "--blocker-weight", "patience_weight": "--patience-weight"}
+# each PretrainConfig field's flag, for learner.pretrain.check_config's messages: "--" and the field's name
+# with dashes, but for these
+_RENAMED = {"teacher_approach_mps": "--teacher-approach-speed", "teacher_patience_s": "--teacher-patience",
+            "teacher_blocker_patience_s": "--teacher-blocker-patience", "delay_max_s": "--delay-max",
+            "torch_threads": "--threads"}
+
+
+def flag(field: str) -> str:
+    """The ``crossway pretrain`` flag that sets PretrainConfig's ``field``."""
+    return _RENAMED.get(field, "--" + field.replace("_", "-"))
 
 
 def _network_sizes(text: str) -> tuple[int, int, int]:
@@ -163,50 +164,28 @@ def _network_sizes(text: str) -> tuple[int, int, int]:
 
 
 def run(args) -> int:
-    from learner.pretrain import PretrainConfig, run_pretrain, scripted_teacher_changes
+    from learner.pretrain import PretrainConfig, check_config, run_pretrain
     from simcore.scenario import load_scenario
 
     load_scenario(args.scenario)  # a clear error for an unknown scenario before anything starts
-    if args.minutes <= 0:
-        raise ValueError(f"--minutes must be > 0, got {args.minutes}")
     if not args.save_every >= 0:
         raise ValueError(f"--save-every must be >= 0 minutes, got {args.save_every}")
-    if args.rounds < 0:
-        raise ValueError(f"--rounds must be >= 0, got {args.rounds}")
-    if args.steps_per_round < 1 or args.batch_size < 1 or args.buffer_samples < 1 or args.threads < 1:
-        raise ValueError("--steps-per-round, --batch-size, --buffer-samples and --threads must be >= 1")
-    if not args.reuse > 0 or not args.learning_rate > 0 or not args.value_coef >= 0:
-        raise ValueError("--reuse and --learning-rate must be > 0, --value-coef >= 0")
-    if not 0.0 < args.gamma <= 1.0:
-        raise ValueError(f"--gamma must be in (0, 1], got {args.gamma}")
-    if not args.teacher_half_life > 0:
-        raise ValueError(f"--teacher-half-life must be > 0 samples, got {args.teacher_half_life}")
-    if not args.brake_weight > 0:
-        raise ValueError(f"--brake-weight must be > 0, got {args.brake_weight}")
-    if not 0.0 < args.blocker_weight < float("inf"):
-        raise ValueError(f"--blocker-weight must be > 0, got {args.blocker_weight}")
-    if args.blocker_weight != 1.0 and not args.teacher_brake_for_blockers:
-        raise ValueError("--blocker-weight weighs the teacher's braking for blockers: it goes with "
-                         "--teacher-brake-for-blockers")
-    if not 0.0 < args.patience_weight < float("inf"):
-        raise ValueError(f"--patience-weight must be > 0, got {args.patience_weight}")
-    if args.patience_weight != 1.0 and args.teacher_patience == float("inf"):
-        raise ValueError("--patience-weight weighs the teacher's going once its patience ran out: it needs a "
-                         "finite --teacher-patience")
-    if not 0.0 <= args.priority_exponent < float("inf"):
-        raise ValueError(f"--priority-exponent must be >= 0 (0: uniform sampling), got {args.priority_exponent}")
-    if args.teacher_approach_speed is not None and not 0.0 < args.teacher_approach_speed < float("inf"):
-        raise ValueError(f"--teacher-approach-speed must be a speed > 0 m/s, got {args.teacher_approach_speed}")
-    for flag, value in (("--teacher-patience", args.teacher_patience),
-                        ("--teacher-blocker-patience", args.teacher_blocker_patience)):
-        if not value > 0:
-            raise ValueError(f"{flag} must be > 0 s ('inf': never), got {value}")
-    if args.teacher_approach_signs != "all" and args.teacher_approach_speed is None:
-        raise ValueError("--teacher-approach-signs goes with --teacher-approach-speed")
-    if args.average_half_life is not None and not 0.0 < args.average_half_life < float("inf"):
-        raise ValueError(f"--average-half-life must be > 0 Adam steps, got {args.average_half_life}")
-    if args.delay_max is not None and not args.delay_max >= 0:
-        raise ValueError(f"--delay-max must be >= 0, got {args.delay_max}")
+    config = PretrainConfig(
+        scenario=args.scenario, minutes=args.minutes, rounds=args.rounds, steps_per_round=args.steps_per_round,
+        reuse=args.reuse, batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef,
+        gamma=args.gamma, teacher_sight=args.teacher_sight, teacher_approach_mps=args.teacher_approach_speed,
+        teacher_approach_signs=args.teacher_approach_signs, teacher_brake_for_blockers=args.teacher_brake_for_blockers,
+        teacher_wait_outside_zones=args.teacher_wait_outside_zones,
+        teacher_break_wait_cycles=args.teacher_break_wait_cycles,
+        teacher_patience_s=args.teacher_patience, teacher_blocker_patience_s=args.teacher_blocker_patience,
+        teacher_half_life=args.teacher_half_life,
+        brake_weight=args.brake_weight, blocker_weight=args.blocker_weight, patience_weight=args.patience_weight,
+        acceleration_loss=args.acceleration_loss, priority_exponent=args.priority_exponent,
+        buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
+        torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network,
+        standing_input=args.standing_input, teacher_checkpoint=args.teacher_checkpoint,
+        driver_checkpoint=args.driver_checkpoint)
+    check_config(config, name=flag)  # every setting's check, told in flags
     if args.out.exists() and not args.out.is_dir():
         raise ValueError(f"--out {str(args.out)!r} is a file, not a directory")
     if (args.out / "pretrained.pt").exists():
@@ -230,25 +209,6 @@ def run(args) -> int:
             except ValueError as error:
                 raise ValueError(f"--network {','.join(map(str, args.network))} and --init-from "
                                  f"{args.init_from}: {error}") from None
-    config = PretrainConfig(
-        scenario=args.scenario, minutes=args.minutes, rounds=args.rounds, steps_per_round=args.steps_per_round,
-        reuse=args.reuse, batch_size=args.batch_size, learning_rate=args.learning_rate, value_coef=args.value_coef,
-        gamma=args.gamma, teacher_sight=args.teacher_sight, teacher_approach_mps=args.teacher_approach_speed,
-        teacher_approach_signs=args.teacher_approach_signs, teacher_brake_for_blockers=args.teacher_brake_for_blockers,
-        teacher_wait_outside_zones=args.teacher_wait_outside_zones,
-        teacher_break_wait_cycles=args.teacher_break_wait_cycles,
-        teacher_patience_s=args.teacher_patience, teacher_blocker_patience_s=args.teacher_blocker_patience,
-        teacher_half_life=args.teacher_half_life,
-        brake_weight=args.brake_weight, blocker_weight=args.blocker_weight, patience_weight=args.patience_weight,
-        acceleration_loss=args.acceleration_loss, priority_exponent=args.priority_exponent,
-        buffer_samples=args.buffer_samples, delay_max_s=args.delay_max, seed=args.seed, init_from=args.init_from,
-        torch_threads=args.threads, average_half_life=args.average_half_life, network=args.network,
-        standing_input=args.standing_input, teacher_checkpoint=args.teacher_checkpoint,
-        driver_checkpoint=args.driver_checkpoint)
-    changed = scripted_teacher_changes(config)
-    if config.teacher_checkpoint is not None and changed:
-        given = ", ".join(SCRIPTED_TEACHER_FLAGS[name] for name in changed)
-        raise ValueError(f"{given} shape the scripted driver; --teacher-checkpoint takes none of them")
     command = "crossway " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     run_pretrain(config, args.out, command, log=lambda line: print(line, flush=True),
                  save_every_s=60.0 * args.save_every)
