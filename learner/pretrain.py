@@ -123,7 +123,7 @@ def check_config(config: PretrainConfig, name=lambda field: field) -> None:
     def finite_positive(value) -> bool:
         return 0.0 < value < float("inf")  # False for nan
 
-    if not finite_positive(config.minutes):
+    if not config.minutes > 0:  # inf: only the rounds stop the run
         raise ValueError(f"{name('minutes')} must be > 0, got {config.minutes}")
     if config.rounds < 0:
         raise ValueError(f"{name('rounds')} must be >= 0, got {config.rounds}")
@@ -171,7 +171,7 @@ def check_config(config: PretrainConfig, name=lambda field: field) -> None:
                          f"got {config.priority_exponent}")
     if config.average_half_life is not None and not finite_positive(config.average_half_life):
         raise ValueError(f"{name('average_half_life')} must be > 0 Adam steps, got {config.average_half_life}")
-    if config.delay_max_s is not None and not 0.0 <= config.delay_max_s < float("inf"):
+    if config.delay_max_s is not None and not config.delay_max_s >= 0:
         raise ValueError(f"{name('delay_max_s')} must be >= 0 s, got {config.delay_max_s}")
     if config.network is not None and (len(config.network) != 3 or min(config.network) < 1):
         raise ValueError(f"{name('network')} must be three sizes >= 1, got {config.network}")
