@@ -445,6 +445,8 @@ def test_pretrain_end_to_end_writes_a_policy_the_other_commands_take(tmp_path):
     (["--rounds", "-1"], "--rounds"),
     (["--teacher-half-life", "0"], "--teacher-half-life"),
     (["--gamma", "1.5"], "--gamma"),
+    (["--buffer-samples", "0"], "--buffer-samples must be >= 1"),
+    (["--learning-rate", "nan"], "--learning-rate must be > 0"),
     (["--brake-weight", "0"], "--brake-weight must be > 0"),
     (["--priority-exponent", "-1"], "--priority-exponent must be >= 0"),
     (["--blocker-weight", "0", "--teacher-brake-for-blockers"], "--blocker-weight must be > 0"),
