@@ -58,7 +58,7 @@ def main() -> None:
         if len(active):
             network = actions[active, 0]
             ruled, _ = rule.apply(result.views[active], result.scalars[active, 0], network,
-                                       views.extent_m, views.shift_m)
+                                  views.extent_m, views.shift_m)
             overridden = ruled < network - 1e-9
             car_steps += len(active)
             fires += int(overridden.sum())
