@@ -64,6 +64,23 @@ def add_parser(subparsers) -> None:
     merge.add_argument("--out", type=Path, required=True, help="output directory for the joined report")
     merge.set_defaults(func=run_merge_command)
 
+    compare = experiments.add_parser(
+        "compare", help="Table I reports of several policies side by side, against the paper (PNG, Markdown, CSV)",
+        description="Read the output folders (or table1-*.json reports) of 'crossway evaluate table1' or 'evaluate "
+                    "merge', of any junction, and write into --out: compare.png (one panel per junction, each "
+                    "policy's reach per sign as a dot with +-1 standard error, the paper's figure as a black "
+                    "bar), compare.md (reach per sign with its standard error, the paper's, and how many points "
+                    "under it) and compare.csv (every outcome per policy and sign). Each report's table is "
+                    "recomputed from its per-test counts, so reports of older versions compare too. Refuses "
+                    "other protocols' reports, and two reports of one name on one junction, before writing "
+                    "anything.", formatter_class=fmt)
+    compare.add_argument("runs", nargs="+", metavar="[NAME=]RUN",
+                         help="a table1 output folder or report; NAME= sets the policy's name (default: the "
+                              "checkpoint's file name)")
+    compare.add_argument("--out", type=Path, required=True, help="output directory")
+    compare.add_argument("--title", default="Table I: reach per sign, ours against the paper", help="figure title")
+    compare.set_defaults(func=run_compare_command)
+
     peek = experiments.add_parser(
         "peek", help="the finished jobs of a Table I run still going (or stopped), per test and sign",
         description="Read the jobs a Table I run into --out has finished so far (kept in --out/.partial until "
@@ -293,6 +310,16 @@ def run_merge_command(args) -> int:
     if missing:
         print(f"note: the shares' protocol has {missing} more {unit} that no run given holds; the report is of "
               f"the first {joined}, {size}", file=sys.stderr)
+    return 0
+
+
+def run_compare_command(args) -> int:
+    from evaluation.compare import load_entries, markdown, write_comparison
+
+    entries = load_entries(args.runs)
+    paths = write_comparison(entries, args.out, args.title)
+    print(markdown(entries), end="")
+    print("wrote " + ", ".join(str(p) for p in paths))
     return 0
 
 
