@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from evaluation.shares import jobs_text
+from evaluation.shares import jobs_text, workers_text
 from simcore.controller import DriverOptions
 from simcore.dynamics import DT, MAX_ACCELERATION, VEHICLE_LENGTH
 from simcore.rewards import END_REASON_NAMES, EndReason
@@ -333,7 +333,7 @@ def merged_from_lines(parts: list[dict]) -> str:
     lines = ""
     for part in parts:
         ran_on = platform_line(part.get("platform")).rstrip(".")
-        lines += (f"- {jobs_text(*part['jobs'])}, {part['episodes']} episodes, {part['wall_s']} s: "
+        lines += (f"- {jobs_text(*part['jobs'])}, {part['episodes']} episodes, {part['wall_s']} s{workers_text(part)}: "
                   f"`{part['command']}` ({ran_on[0].lower() + ran_on[1:]})\n")
     return lines
 
@@ -357,7 +357,7 @@ def merge_runs(reports: list, out_dir, command: str) -> dict:
     writing anything. ``reports``: (path, parsed JSON) per run."""
     from pathlib import Path
 
-    from evaluation.shares import check_contiguous, check_same_protocol, merged_meta
+    from evaluation.shares import check_contiguous, check_same_protocol, merged_meta, part_record
 
     for path, record in reports:
         if not all(key in record for key in ("episodes", "no_infraction", *COUNTS)):
@@ -383,8 +383,7 @@ def merge_runs(reports: list, out_dir, command: str) -> dict:
     last_protocol_jobs = parts[-1][1].get("protocol_jobs", stop)
     meta.update({"jobs": [0, stop], "protocol_jobs": stop, "protocol_episodes": counts["episodes"],
                  "jobs_not_joined": max(0, last_protocol_jobs - stop),
-                 "merged_from": [{"path": str(path), "command": r.get("command"), "jobs": list(jobs_of(r)),
-                                  "episodes": r["episodes"], "wall_s": r.get("wall_s"), "platform": r.get("platform")}
+                 "merged_from": [part_record(path, r, jobs=list(jobs_of(r)), episodes=r["episodes"])
                                  for path, r in parts]})
     summary = write_outputs(Path(out_dir), counts, meta)
     return {"summary": summary, "paths": summary["paths"], "meta": meta}

@@ -153,7 +153,9 @@ def merged_meta(parts: list[tuple[Path, dict]], keys: tuple[str, ...], command: 
         "checkpoint": first.get("checkpoint"),
         "checkpoint_sha256": next((m.get("checkpoint_sha256") for _, m in parts if m.get("checkpoint_sha256")), None),
         "share": None,
-        "workers": sum(m.get("workers", 0) or 0 for _, m in parts),
+        # the most worker processes any one part ran at once (each part's own is in merged_from): the
+        # parts often ran on machines of their own, so a sum would claim a parallelism no run had
+        "workers": max((m.get("workers") or 0 for _, m in parts), default=0),
         "wall_s": round(sum(m.get("wall_s", 0.0) or 0.0 for _, m in parts), 1),  # the parts' own, added up
         "command": command,
         "jobs_from_an_earlier_run": sum(m.get("jobs_from_an_earlier_run", 0) or 0 for _, m in parts),
@@ -161,6 +163,20 @@ def merged_meta(parts: list[tuple[Path, dict]], keys: tuple[str, ...], command: 
         "platform": next((m.get("platform") for _, m in parts if m.get("platform")), None),
     })
     return meta
+
+
+def part_record(path: Path, meta: dict, **size) -> dict:
+    """One part of a joined report, for its ``merged_from``: where it is, how it ran (command, wall
+    time [s], worker processes, machine) and which part of the protocol it holds (``size``: its
+    jobs or cells, and episodes)."""
+    return {"path": str(path), "command": meta.get("command"), **size, "wall_s": meta.get("wall_s"),
+            "workers": meta.get("workers"), "platform": meta.get("platform")}
+
+
+def workers_text(part: dict) -> str:
+    """" on N workers" for a part of a joined report that records them (parts before session 43 do not)."""
+    workers = part.get("workers")
+    return f" on {workers} worker{'s' if workers != 1 else ''}" if workers else ""
 
 
 def merge_reports(paths: list[Path], out_dir: Path, command: str) -> dict:

@@ -22,7 +22,8 @@ import numpy as np
 
 from evaluation.parallel import (cache_salt, clear_partial, file_digest, kept_jobs, numeric_platform, partial_dir,
                                  platform_line, run_parallel)
-from evaluation.shares import check_contiguous, check_same_protocol, jobs_text, merged_meta, share_range, unpack
+from evaluation.shares import (check_contiguous, check_same_protocol, jobs_text, merged_meta, part_record, share_range,
+                               unpack, workers_text)
 from simcore.controller import DriverOptions
 from simcore.dynamics import DT
 
@@ -361,7 +362,7 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
         for part in meta["merged_from"]:
             ran_on = platform_line(part.get("platform")).rstrip(".")
             page += (f"- {jobs_text(*part['jobs'])}, {part['episodes_per_test']} episodes per test, "
-                     f"{part['wall_s']} s: `{part['command']}` ({ran_on[0].lower() + ran_on[1:]})\n")
+                     f"{part['wall_s']} s{workers_text(part)}: `{part['command']}` ({ran_on[0].lower() + ran_on[1:]})\n")
         page += "\n"
         if meta.get("jobs_not_joined"):
             page += (f"The parts' protocol has {meta['jobs_not_joined']} more job(s) per test that no part holds: "
@@ -470,9 +471,8 @@ def merge_runs(reports: list[tuple[Path, dict]], out_dir: Path, command: str) ->
         "protocol_episodes_per_test": episodes,
         # jobs of the parts' protocol that no part ran (a share left out): the report is then a shorter run
         "jobs_not_joined": max(0, last_protocol_jobs - stop),
-        "merged_from": [{"path": str(path), "command": m.get("command"), "jobs": list(jobs_of(m)),
-                         "episodes_per_test": m["episodes_per_test"], "wall_s": m.get("wall_s"),
-                         "platform": m.get("platform")} for path, m, _ in parts],
+        "merged_from": [part_record(path, m, jobs=list(jobs_of(m)), episodes_per_test=m["episodes_per_test"])
+                        for path, m, _ in parts],
     })
     paths_written = write_outputs(out_dir, first["scenario"], results, table, meta)
     return {"table": table, "paths": paths_written, "meta": meta}

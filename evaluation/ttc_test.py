@@ -194,7 +194,7 @@ def merge_runs(reports: list, out_dir: Path, command: str) -> dict:
     writes: CSV, JSON and figures; refuses runs of other thresholds, sizes, seeds or checkpoints,
     and runs that overlap or leave a gap, before writing anything. ``reports``: (path, parsed
     JSON) per run."""
-    from evaluation.shares import check_contiguous, check_same_protocol, merged_meta, unpack
+    from evaluation.shares import check_contiguous, check_same_protocol, merged_meta, part_record, unpack
 
     parts = unpack(reports, "rows", "threshold_s", "TTC comparison")
     for _, meta, rows in parts:  # reports before session 38 name no drivers
@@ -210,8 +210,7 @@ def merge_runs(reports: list, out_dir: Path, command: str) -> dict:
     last_protocol_cells = parts[-1][1].get("protocol_cells", stop)
     meta.update({"cells": [0, stop], "protocol_cells": stop, "cells_not_joined": max(0, last_protocol_cells - stop),
                  "ttc_cells_from_sweep": sum(m.get("ttc_cells_from_sweep", 0) for _, m, _ in parts),
-                 "merged_from": [{"path": str(path), "command": m.get("command"), "cells": list(cells_of(m, r)),
-                                  "wall_s": m.get("wall_s"), "platform": m.get("platform")} for path, m, r in parts]})
+                 "merged_from": [part_record(path, m, cells=list(cells_of(m, r))) for path, m, r in parts]})
     paths = write_outputs(out_dir, rows, meta)
     return {"rows": rows, "paths": paths, "meta": meta}
 

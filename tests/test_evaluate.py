@@ -652,6 +652,9 @@ def test_table1_shares_merge_into_the_whole_protocol(tmp_path):
     assert merged["meta"]["jobs"] == [0, 2] and [p["jobs"] for p in merged["meta"]["merged_from"]] == [[0, 1], [1, 2]]
     page = (tmp_path / "joined" / "table1-hard.md").read_text()
     assert "Joined from runs over other jobs of each test" in page and "--share 2/2" in page
+    # each part ran two workers on its own: the joined run records that, not a sum no run had
+    assert merged["meta"]["workers"] == 2 and [p["workers"] for p in merged["meta"]["merged_from"]] == [2, 2]
+    assert "s on 2 workers: `" in page
     assert merged["meta"]["jobs_not_joined"] == 0 and "note:" not in joined.stderr
     as_of_three = _report(tmp_path / "second")  # as if share 2/3 of a protocol of three jobs per test
     as_of_three["meta"].update(protocol_jobs=3, share=[2, 3], protocol_episodes_per_test=1500)
@@ -748,7 +751,10 @@ def test_right_of_way_shares_merge_into_the_whole_test(tmp_path, monkeypatch):
         assert merged[key] == whole[key], key
     assert sum(merged["agent_end_reasons"].values()) == 5 * 3
     assert [p["jobs"] for p in merged["merged_from"]] == [[0, 1], [1, 3]] and merged["jobs_not_joined"] == 0
+    # a part of one job ran one worker: the joined test records the most any part ran, not their sum
+    assert merged["workers"] == 2 and [p["workers"] for p in merged["merged_from"]] == [1, 2]
     page = (tmp_path / "joined" / "right-of-way-easy.md").read_text()
+    assert "s on 1 worker: `" in page and "s on 2 workers: `" in page
     assert "Joined from runs over other jobs of the test" in page
     assert merged["platform"] == second["platform"] and "(the machine it ran on is not on record)" in page
     assert (tmp_path / "joined" / "right-of-way-easy.csv").read_text().splitlines()[1].startswith("easy,5,")
@@ -806,6 +812,7 @@ def test_ttc_shares_merge_into_the_whole_comparison(tmp_path):
     for name in ("ttc-goal.png", "ttc-time_over.png"):
         assert (tmp_path / "joined" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert merged["meta"]["cells"] == [0, 3] and merged["meta"]["cells_not_joined"] == 0
+    assert merged["meta"]["workers"] == 2 and [p["workers"] for p in merged["meta"]["merged_from"]] == [2, 2]
 
     only_first = crossway("evaluate", "merge", str(tmp_path / "first"), str(tmp_path / "first"), "--out",
                           str(tmp_path / "refused"))
