@@ -26,6 +26,8 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from crossway.stopping import StopRequest, stop_handlers
+
 BAR_WIDTH = 30  # characters of the progress bar
 ORPHAN_CHECK_S = 1.0  # how often a worker checks that the command that started it still runs [s]
 
@@ -47,10 +49,6 @@ def _exit_when_orphaned(parent_pid: int) -> None:
 
 def _run_job(function: Callable, job: tuple):
     return function(*job, _progress)
-
-
-def _stop_on_sigterm(*_) -> None:
-    raise SystemExit(128 + signal.SIGTERM)  # unwinds the pool's context: its workers are terminated
 
 
 def job_key(function: Callable, job: tuple, salt: str = "") -> str:
@@ -246,8 +244,9 @@ def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers:
     done_at_start = done
     context = multiprocessing.get_context("spawn")  # workers start clean (Zenoh, torch threads)
     progress = context.Queue()
-    in_main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGTERM, _stop_on_sigterm) if in_main_thread else None
+    # Ctrl-C raises KeyboardInterrupt, SIGTERM SystemExit(143): either unwinds the pool's context,
+    # which terminates its workers
+    stop = StopRequest(sigterm_exits=True)
 
     def keep(index: int):
         def callback(result) -> None:  # the pool's result thread, as each job returns
@@ -261,11 +260,12 @@ def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers:
         return callback
 
     try:
-        with context.Pool(processes=max(1, min(workers, len(todo))), initializer=_start_worker,
+        with stop_handlers(stop), context.Pool(processes=max(1, min(workers, len(todo))), initializer=_start_worker,
                           initargs=(progress, os.getpid())) as pool:
             pending = [pool.apply_async(_run_job, (function, jobs[index]), callback=keep(index)) for index in todo]
             shown = -1.0
             while not all(p.ready() for p in pending) or done < total:
+                stop.check()
                 try:
                     done += progress.get(timeout=0.5)
                 except queue.Empty:
@@ -286,8 +286,6 @@ def run_parallel(function: Callable, jobs: Sequence[tuple], total: int, workers:
             for p in pending:
                 p.get()  # a job's exception surfaces here
     finally:
-        if in_main_thread:
-            signal.signal(signal.SIGTERM, previous)
         progress.close()
     if interactive:
         print(file=sys.stderr)

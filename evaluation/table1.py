@@ -362,7 +362,8 @@ def write_outputs(out_dir: Path, scenario: str, tests: list[dict], table: dict, 
         for part in meta["merged_from"]:
             ran_on = platform_line(part.get("platform")).rstrip(".")
             page += (f"- {jobs_text(*part['jobs'])}, {part['episodes_per_test']} episodes per test, "
-                     f"{part['wall_s']} s{workers_text(part)}: `{part['command']}` ({ran_on[0].lower() + ran_on[1:]})\n")
+                     f"{part['wall_s']} s{workers_text(part)}: `{part['command']}` "
+                     f"({ran_on[0].lower() + ran_on[1:]})\n")
         page += "\n"
         if meta.get("jobs_not_joined"):
             page += (f"The parts' protocol has {meta['jobs_not_joined']} more job(s) per test that no part holds: "

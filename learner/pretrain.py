@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import csv
 import json
-import signal
-import threading
 import time
 from collections import deque
 from dataclasses import asdict, dataclass, replace
@@ -31,6 +29,7 @@ import torch
 
 from algo.imitation import ACCELERATION_LOSSES, BRAKE_LABEL, DemonstrationBuffer, Episode, imitation_loss, newest_frames
 from algo.policy import ACTION_SCALE, Policy, PolicyConfig, load_policy, save_atomically, views_record, widen
+from crossway.stopping import StopRequest, stop_handlers
 from simcore.controller import BLOCKER_PATIENCE_S, PATIENCE_S, SIGHTS
 
 PROGRESS_COLUMNS = ("wall_s", "round", "teacher_probability", "samples", "updates", "action_loss_acc",
@@ -400,10 +399,6 @@ def _fmt(rate: float | None) -> str:
     return "  -  " if rate is None else f"{100 * rate:5.1f}%"
 
 
-def _raise_interrupt(*_) -> None:
-    raise KeyboardInterrupt  # SIGTERM (a scheduler, kill) ends the run as Ctrl-C does
-
-
 def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print, save_every_s: float = 300.0) -> Path:
     """Rounds until ``config.minutes`` have passed (or ``config.rounds`` are done); writes
     ``pretrained.pt``, ``pretrain.json`` and ``progress.csv``.
@@ -431,8 +426,6 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print,
     started = time.monotonic()
     deadline = started + 60.0 * config.minutes
     progress_path = out_dir / "progress.csv"
-    in_main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt) if in_main_thread else None
     last_save = started
 
     def save(note: str) -> Path:
@@ -442,7 +435,7 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print,
                            averaged=False)
         return path
 
-    with progress_path.open("w", newline="") as handle:
+    with progress_path.open("w", newline="") as handle, stop_handlers(StopRequest()) as stop:
         writer = csv.DictWriter(handle, fieldnames=PROGRESS_COLUMNS, extrasaction="ignore")
         writer.writeheader()
         try:
@@ -464,11 +457,9 @@ def run_pretrain(config: PretrainConfig, out_dir: Path, command: str, log=print,
                     save(f"{command}: a snapshot after {trainer.round} rounds, {trainer.buffer.added:,} samples, "
                          f"{trainer.updates:,} updates, {(time.monotonic() - started) / 60:.1f} min")
                     last_save = time.monotonic()
+                stop.check()
         except KeyboardInterrupt:  # Ctrl-C or SIGTERM: keep what was learnt, as crossway train does
             log("pretrain: interrupted, writing the policy as it is")
-        finally:
-            if in_main_thread:
-                signal.signal(signal.SIGTERM, previous)
     wall = time.monotonic() - started
     note = (f"{command}: {trainer.round} rounds, {trainer.buffer.added:,} samples, {trainer.updates:,} updates, "
             f"{wall / 60:.1f} min")

@@ -2,6 +2,7 @@
 
 import argparse
 import csv
+import json
 import os
 import shutil
 import subprocess
@@ -531,6 +532,35 @@ def test_ctrl_c_or_sigterm_writes_the_policy_learnt_so_far(tmp_path, stop_signal
     assert "a snapshot" not in note and "rounds" in note
     assert (out / "pretrain.json").exists()
     assert not list(out.glob(".*.tmp"))
+
+
+def test_a_stop_signal_swallowed_by_a_finalizer_still_ends_the_run(tmp_path, monkeypatch):
+    """A KeyboardInterrupt that the stop handler raises while a finalizer runs is swallowed by
+    Python ("Exception ignored in ..."); the run must stop at the end of that round all the same,
+    write what it learnt and put the signal handlers back."""
+    import signal
+
+    from learner.pretrain import PretrainConfig, run_pretrain
+
+    swallowed = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda hook_args: swallowed.append(hook_args.exc_type))
+
+    class SignalsWhenCollected:
+        def __del__(self):
+            signal.raise_signal(signal.SIGTERM)  # the handler runs here, inside the finalizer
+
+    def log(line: str) -> None:
+        if " round 0 " in line:  # the log counts rounds from 0: the first
+            SignalsWhenCollected()  # collected at once: its finalizer signals
+
+    before = signal.getsignal(signal.SIGTERM)
+    config = PretrainConfig(scenario="easy", rounds=30, steps_per_round=50, torch_threads=1, minutes=5.0)
+    path = run_pretrain(config, tmp_path / "pre", "test", log=log, save_every_s=0.0)
+    assert swallowed == [KeyboardInterrupt]  # the exception did not reach the loop
+    record = json.loads((tmp_path / "pre" / "pretrain.json").read_text())
+    assert record["rounds"] == 1  # stopped at the end of the round it came in, not after 30
+    assert "1 rounds" in torch.load(path, weights_only=False)["note"]
+    assert signal.getsignal(signal.SIGTERM) is before
 
 
 def test_pretrain_widens_the_initial_network_and_keeps_its_driving(tmp_path):
