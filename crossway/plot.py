@@ -59,6 +59,22 @@ def _label(value: float) -> str:
     return f"{value:g}"
 
 
+def _y_axis_label(ctx, text: str, middle_y: float) -> None:
+    """``text`` upright along the left edge, centred on ``middle_y``."""
+    ctx.save()
+    ctx.move_to(22, middle_y + ctx.text_extents(text).width / 2)
+    ctx.rotate(-math.pi / 2)
+    ctx.show_text(text)
+    ctx.restore()
+
+
+def _legend_name(ctx, left: float, y: float, name: str) -> None:
+    """A legend row's text, beside the swatch at ``left``."""
+    ctx.set_source_rgb(0.1, 0.1, 0.1)
+    ctx.move_to(left + 26, y)
+    ctx.show_text(name)
+
+
 def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, title: str, x_label: str,
                 y_label: str, y_range: tuple[float, float] | None = None, width: int = 800,
                 height: int = 480, styles: list[tuple[int, bool]] | None = None, markers: bool = False,
@@ -120,11 +136,7 @@ def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, t
     ctx.set_font_size(13)
     ctx.move_to(left + (width - left - right) / 2 - ctx.text_extents(x_label).width / 2, height - bottom + 42)
     ctx.show_text(x_label)
-    ctx.save()
-    ctx.move_to(22, top + (height - top - bottom) / 2 + ctx.text_extents(y_label).width / 2)
-    ctx.rotate(-math.pi / 2)
-    ctx.show_text(y_label)
-    ctx.restore()
+    _y_axis_label(ctx, y_label, top + (height - top - bottom) / 2)
     ctx.save()
     ctx.rectangle(left, top, width - left - right, height - top - bottom)
     ctx.clip()
@@ -149,9 +161,7 @@ def plot_curves(series: list[tuple[str, list[float], list[float]]], out: Path, t
         for start in ((0, 12) if dashed else (0,)):  # a dashed swatch is two short bars
             ctx.rectangle(left + start, y - 6, 8 if dashed else 18, 4)
         ctx.fill()
-        ctx.set_source_rgb(0.1, 0.1, 0.1)
-        ctx.move_to(left + 26, y)
-        ctx.show_text(name)
+        _legend_name(ctx, left, y, name)
     surface.write_to_png(str(out))
     return out
 
@@ -191,11 +201,7 @@ def plot_dot_panels(panels: list[tuple[str, list[tuple[str, list[float | None], 
     ctx.move_to(left, 26)
     ctx.show_text(title)
     ctx.set_font_size(13)
-    ctx.save()
-    ctx.move_to(22, top + (height - top - bottom) / 2 + ctx.text_extents(y_label).width / 2)
-    ctx.rotate(-math.pi / 2)
-    ctx.show_text(y_label)
-    ctx.restore()
+    _y_axis_label(ctx, y_label, top + (height - top - bottom) / 2)
     ticks = _nice_ticks(y0, y1)
     for index, (panel_title, series, references) in enumerate(panels):
         x_left = left + index * (panel_width + gap)
@@ -251,12 +257,9 @@ def plot_dot_panels(panels: list[tuple[str, list[tuple[str, list[float | None], 
         ctx.set_source_rgb(*colour)
         if is_bar:
             ctx.rectangle(left, y - 6, 18, 3)
-            ctx.fill()
         else:
             ctx.arc(left + 9, y - 4, 4, 0, 2 * math.pi)
-            ctx.fill()
-        ctx.set_source_rgb(0.1, 0.1, 0.1)
-        ctx.move_to(left + 26, y)
-        ctx.show_text(name)
+        ctx.fill()
+        _legend_name(ctx, left, y, name)
     surface.write_to_png(str(out))
     return out

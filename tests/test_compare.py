@@ -8,11 +8,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-import cairo
 import numpy as np
 
 from crossway.plot import COLOURS
 from evaluation.compare import CSV_COLUMNS, load_entry, parse_run, protocol_text
+from test_plot import pixels
 
 RESULTS = Path(__file__).resolve().parent.parent / "docs" / "results"
 EASY = RESULTS / "pretrain-easy-guard" / "table1-easy-full"  # written with goal_stderr
@@ -24,12 +24,6 @@ ROW_MEDIUM = RESULTS / "row-medium-priority"
 
 def crossway(*args):
     return subprocess.run([sys.executable, "-m", "crossway", *args], capture_output=True, text=True, timeout=120)
-
-
-def pixels(path) -> np.ndarray:
-    surface = cairo.ImageSurface.create_from_png(str(path))
-    data = np.frombuffer(surface.get_data(), np.uint8).reshape(surface.get_height(), surface.get_stride() // 4, 4)
-    return data[:, : surface.get_width(), 2::-1]  # BGRx in memory -> RGB
 
 
 def columns_of(image: np.ndarray, colour) -> np.ndarray:
