@@ -19,6 +19,39 @@ def test_help_lists_commands():
         assert command in result.stdout
 
 
+def test_every_help_says_defaults_once_and_never_none():
+    """Every subcommand's --help, as argparse prints it: "(default: X)" where a default says
+    something, and not after a required option, an on/off flag, a default of None or "", or a help
+    text that already names its default."""
+    import argparse
+
+    from crossway.cli import build_parser
+
+    def parsers(parser, name):
+        yield name, parser
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub, child in action.choices.items():
+                    yield from parsers(child, f"{name} {sub}")
+
+    shown = 0
+    for name, parser in parsers(build_parser(), "crossway"):
+        text = " ".join(parser.format_help().split())  # argparse wraps lines anywhere
+        assert "(default: None)" not in text, name
+        assert "(default: False)" not in text and "(default: )" not in text, name
+        shown += text.count("(default: ")
+        for action in parser._actions:
+            words = " ".join((action.help or "").split())
+            if words and "default" in words.lower():
+                assert f"{words} (default: " not in text, (name, action.option_strings)
+    assert shown > 100  # the defaults that say something are still there
+    help_of = dict(parsers(build_parser(), "crossway"))
+    train = " ".join(help_of["crossway train"].format_help().split())
+    assert "the default step (0.001)" in train  # a help that names its default fills it in
+    table1 = " ".join(help_of["crossway evaluate table1"].format_help().split())
+    assert "(the paper: 3000) (default: 3000)" in table1
+
+
 def test_bench_sim_prints_one_json_object():
     result = crossway("bench", "sim", "--scenario", "easy", "--seconds", "1", "--json")
     assert result.returncode == 0, result.stderr

@@ -19,6 +19,8 @@ from collections import Counter
 
 import numpy as np
 
+from crossway.commands import HelpFormatter
+
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -36,7 +38,7 @@ def add_parser(subparsers) -> None:
             "Simulator.step, which renders all four 84x84 views of every agent. The driver's time "
             "is reported apart. Runs pinned to one CPU core unless --no-pin."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     sim.add_argument("--scenario", default="hard", help="built-in scenario (easy, medium, hard) or a TOML path")
     sim.add_argument("--seconds", type=float, default=10.0, help="wall-clock time to measure [s]")
@@ -57,7 +59,7 @@ def add_parser(subparsers) -> None:
             "rate on the same batch (one update segment), timed as torch modules and in the matrix "
             "form the actor uses; the faster of the two is the bar. Pinned to one core, one torch thread."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     actor.add_argument("--scenario", default="hard", help="built-in scenario or a TOML path")
     actor.add_argument("--seconds", type=float, default=20.0, help="wall-clock time to measure [s]")
@@ -81,7 +83,7 @@ def add_parser(subparsers) -> None:
             "splits into equal members (an output ensemble, docs/scripts/ensemble.py) 'joined', the "
             "one joined network with its zero blocks multiplied. Pinned to one core, one torch thread."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     policy.add_argument("--checkpoint", required=True, help="a checkpoint or models/*.pt policy")
     policy.add_argument("--cars", type=int, default=8, help="cars per forward pass (hard has 8 lanes)")
@@ -103,7 +105,7 @@ def add_parser(subparsers) -> None:
             "report pushes applied per second, pushes dropped by the bounded queue, and the learner "
             "process's resident memory at the start and the end."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     learner.add_argument("--seconds", type=float, default=20.0, help="wall-clock time to measure [s]")
     learner.add_argument("--queue-size", type=int, default=64, help="learner's bounded push queue")

@@ -17,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 
+from crossway.commands import HelpFormatter
+
 CURRICULA = ("none", "single", "yield")
 YIELD_DRILL_TRAFFIC_LEVEL = "medium"  # the TTC test's level: at most 8 traffic cars
 YIELD_DRILL_TRAFFIC_DELAY_MAX_S = 40.0  # longest wait before a traffic car starts again [s]
@@ -88,7 +90,7 @@ def _add_actor_options(parser: argparse.ArgumentParser) -> None:
                         help="SGD step of each agent's local copy at its updates during the episode (the "
                              "'delayed' part of D-A3C), >= 0. 0 drives the whole episode on the weights it "
                              "started from. Lower it to fine-tune a trained policy at a small --sigma-start: "
-                             "the local gradient scales as 1/sigma^2, and at sigma 0.05 the default step "
+                             "the local gradient scales as 1/sigma^2, and at sigma 0.05 the default step (%(default)g) "
                              "alone cut a hard student's training reach from 93%% to 52%% (docs/imitation.md)")
     parser.add_argument("--acceleration-cost", type=float, default=0.0, metavar="COEF",
                         help="weight of a cost on the squared acceleration mean per step (not in the paper; 0: "
@@ -97,7 +99,7 @@ def _add_actor_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_parser(subparsers) -> None:
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+    fmt = HelpFormatter
     learner = subparsers.add_parser(
         "learner", help="run the central D-A3C learner", formatter_class=fmt,
         description="Own the global network and its optimizer, apply actors' whole-episode gradients as "

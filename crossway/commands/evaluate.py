@@ -8,6 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from crossway.commands import HelpFormatter
 from simcore.scenario import SIGN_CHANGE_RESTARTS
 
 
@@ -20,7 +21,7 @@ def add_parser(subparsers) -> None:
                     "--out/.partial until the outputs are written.",
     )
     experiments = parser.add_subparsers(dest="experiment", metavar="EXPERIMENT", required=True)
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+    fmt = HelpFormatter
     table1 = experiments.add_parser(
         "table1", help="Table I: reaches, crashes, off-roads, time-overs and speed per sign",
         description="The paper's Table I protocol: tests with delay_max = 10, 20, ... s up to the scenario's "
@@ -163,7 +164,8 @@ def add_parser(subparsers) -> None:
     export.add_argument("--emergency-margin", type=float, default=None, metavar="M",
                         help="with --emergency-braking: gap kept to the car in the path [m] (default 1.5)")
     export.add_argument("--emergency-reaction", type=float, default=None, metavar="S",
-                        help="with --emergency-braking: time the trigger allows before braking starts [s] (default 0.5)")
+                        help="with --emergency-braking: time the trigger allows before braking starts [s] "
+                             "(default 0.5)")
     export.add_argument("--emergency-deceleration", type=float, default=None, metavar="A",
                         help="with --emergency-braking: the braking the trigger distance assumes [m/s^2] (default 2)")
     export.set_defaults(func=run_export_command)
@@ -294,7 +296,8 @@ def run_merge_command(args) -> int:
         from evaluation.table1 import markdown
 
         print(markdown(meta["scenario"], report["table"]), end="")
-        size, joined, missing = f"{meta['episodes_per_test']} episodes per test", meta["jobs"][1], meta["jobs_not_joined"]
+        size = f"{meta['episodes_per_test']} episodes per test"
+        joined, missing = meta["jobs"][1], meta["jobs_not_joined"]
         unit = "job(s) per test"
     elif kind == "right-of-way":
         print(report["summary"]["markdown"], end="")

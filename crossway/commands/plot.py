@@ -7,6 +7,8 @@ import argparse
 import math
 from pathlib import Path
 
+from crossway.commands import HelpFormatter
+
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -14,7 +16,7 @@ def add_parser(subparsers) -> None:
         description="Draw one curve per progress.csv (written by 'crossway train' into its run directory, or by "
                     "'crossway pretrain' into its --out), e.g. the rolling reach rate against agent-steps, or "
                     "--x samples --y student_reach_rate for a pretrain run.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument("progress", nargs="+", type=Path,
                         help="progress.csv files (or other CSVs, such as Table I's table1-S-tests.csv); "

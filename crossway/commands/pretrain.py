@@ -8,6 +8,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from crossway.commands import HelpFormatter
+
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -23,7 +25,7 @@ def add_parser(subparsers) -> None:
                     "'crossway train --init-from' and every 'crossway evaluate' take, and OUT/progress.csv. "
                     "Not part of the paper's method, which learns from rewards alone "
                     "(docs/training.md#warm-start-from-a-scripted-teacher).",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument("--scenario", default="easy", help="built-in scenario (easy, medium, hard) or a TOML path")
     parser.add_argument("--minutes", type=float, default=10.0, help="wall-clock budget [min]")
