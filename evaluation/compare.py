@@ -95,7 +95,39 @@ def markdown(entries: list[dict]) -> str:
                     for s in SIGNS]
             gap_text = " / ".join("-" if g is None else f"{g:.1f}" for g in gaps)
             lines.append(f"| {entry['name']} | {scenario} | {protocol_text(entry)} | {ours} | {theirs} | {gap_text} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + markdown_differences(entries)
+
+
+def difference(first: dict, other: dict) -> tuple[float, float] | None:
+    """``other``'s reach minus ``first``'s, in points, and that difference in standard errors of
+    the difference (the two taken as independent samples: for runs of the same episodes, which
+    are paired, this overstates the uncertainty); None where a sign is missing or no error."""
+    if first is None or other is None:
+        return None
+    error = (first["goal_stderr"] ** 2 + other["goal_stderr"] ** 2) ** 0.5
+    points = 100.0 * (other["goal"] - first["goal"])
+    return (points, points / (100.0 * error)) if error > 0 else None
+
+
+def markdown_differences(entries: list[dict]) -> str:
+    """Each policy against the first one given on its junction: reach difference per sign in
+    points and in standard errors of the difference ("" where no junction has two policies)."""
+    lines = []
+    for scenario in scenarios_of(entries):
+        on_junction = [e for e in entries if e["scenario"] == scenario]
+        base = on_junction[0]
+        for entry in on_junction[1:]:
+            cells = []
+            for sign in SIGNS:
+                found = difference(base["table"].get(sign), entry["table"].get(sign))
+                cells.append("-" if found is None else f"{found[0]:+.1f} ({found[1]:+.1f})")
+            lines.append(f"| {entry['name']} | {base['name']} | {scenario} | " + " | ".join(cells) + " |")
+    if not lines:
+        return ""
+    header = ("\nEach policy against the first given on its junction: reach difference in points (in standard errors "
+              "of the difference, the runs taken as independent; |2| or more is unlikely to be chance):\n\n"
+              "| policy | against | junction | " + " | ".join(SIGNS) + " |\n|---|---|---|" + "---|" * len(SIGNS))
+    return header + "\n" + "\n".join(lines) + "\n"
 
 
 def csv_rows(entries: list[dict]) -> list[dict]:

@@ -56,6 +56,16 @@ def test_compare_puts_reports_side_by_side_with_the_paper(tmp_path):
     assert "| guard | easy | 3 x 3000 | 0.981 (0.002) / 0.984 (0.002) / 0.984 (0.002) | 0.998 / 0.995 / 0.992 |" in page
     assert "| nine | hard | 10 x 3000 | 0.973 (0.002) / 0.975 (0.002) / 0.968 (0.002) |" in page
     assert page == result.stdout.rsplit("wrote ", 1)[0]  # the page is what the command printed
+    # the nine against the nine with the rule (the first on hard), by hand from the two reports
+    rule, nine = (json.loads(next(d.glob("table1-*.json")).read_text())["table"] for d in (HARD_RULE, HARD_NINE))
+    cells = []
+    for sign in ("none", "yield", "stop"):
+        points = 100 * (nine[sign]["goal"] - rule[sign]["goal"])
+        error = 100 * math.hypot(nine[sign]["goal_stderr"], rule[sign]["goal_stderr"])
+        cells.append(f"{points:+.1f} ({points / error:+.1f})")
+    assert "| nine | nine+rule | hard | " + " | ".join(cells) + " |" in page
+    assert cells[2] == "-0.5 (-2.2)"  # the rule's gain at stop signs: 0.5 points, 2.2 standard errors
+    assert "| guard |" not in page.split("Each policy against")[1]  # alone on its junction: no row
     image = pixels(out / "compare.png")
     panel, gap, left = 260, 16, 70
     assert image.shape[1] == left + 20 + 2 * panel + gap  # two junctions, two panels

@@ -70,8 +70,9 @@ def add_parser(subparsers) -> None:
         description="Read the output folders (or table1-*.json reports) of 'crossway evaluate table1' or 'evaluate "
                     "merge', of any junction, and write into --out: compare.png (one panel per junction, each "
                     "policy's reach per sign as a dot with +-1 standard error, the paper's figure as a black "
-                    "bar), compare.md (reach per sign with its standard error, the paper's, and how many points "
-                    "under it) and compare.csv (every outcome per policy and sign). Each report's table is "
+                    "bar), compare.md (reach per sign with its standard error, the paper's, how many points under "
+                    "it, and each policy against the first one given on its junction, in points and standard "
+                    "errors of the difference) and compare.csv (every outcome per policy and sign). Each report's table is "
                     "recomputed from its per-test counts, so reports of older versions compare too. Refuses "
                     "other protocols' reports, and two reports of one name on one junction, before writing "
                     "anything.", formatter_class=fmt)
