@@ -170,7 +170,8 @@ def plot_dot_panels(panels: list[tuple[str, list[tuple[str, list[float | None], 
                                        list[float | None]]],
                     categories: list[str], out: Path, title: str, y_label: str, reference_name: str,
                     panel_width: int = 260, height: int = 420) -> Path:
-    """Values by category, one panel each, side by side on a shared y axis: every series a dot per
+    """Fractions (rates in [0, 1]) by category, one panel each, side by side on a shared y axis
+    that runs on a 0.01 grid from just under the lowest value to at most 1: every series a dot per
     category with a whisker of +-its error (None: no dot, or no whisker), the panel's reference
     value per category as a black bar across the category (None: no bar). ``panels``: (panel title,
     series as (name, values, errors), references). A series keeps its colour in every panel."""

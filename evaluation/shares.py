@@ -174,7 +174,8 @@ def part_record(path: Path, meta: dict, **size) -> dict:
 
 
 def workers_text(part: dict) -> str:
-    """" on N workers" for a part of a joined report that records them (parts before session 43 do not)."""
+    """The words ' on N workers' for a part of a joined report that records them (parts before
+    session 43 do not)."""
     workers = part.get("workers")
     return f" on {workers} worker{'s' if workers != 1 else ''}" if workers else ""
 

@@ -72,8 +72,9 @@ def add_parser(subparsers) -> None:
                     "policy's reach per sign as a dot with +-1 standard error, the paper's figure as a black "
                     "bar), compare.md (reach per sign with its standard error, the paper's, how many points under "
                     "it, and each policy against the first one given on its junction, in points and standard "
-                    "errors of the difference) and compare.csv (every outcome per policy and sign). Each report's table is "
-                    "recomputed from its per-test counts, so reports of older versions compare too. Refuses "
+                    "errors of the difference) and compare.csv (every outcome per policy and sign). Each "
+                    "report's table is recomputed from its per-test counts, so reports of older versions compare "
+                    "too. Refuses "
                     "other protocols' reports, and two reports of one name on one junction, before writing "
                     "anything.", formatter_class=fmt)
     compare.add_argument("runs", nargs="+", metavar="[NAME=]RUN",
