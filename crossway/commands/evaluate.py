@@ -79,7 +79,7 @@ def add_parser(subparsers) -> None:
                     "anything.", formatter_class=fmt)
     compare.add_argument("runs", nargs="+", metavar="[NAME=]RUN",
                          help="a table1 output folder or report; NAME= sets the policy's name (default: the "
-                              "checkpoint's file name)")
+                              "checkpoint's file name without .pt)")
     compare.add_argument("--out", type=Path, required=True, help="output directory")
     compare.add_argument("--title", default="Table I: reach per sign, ours against the paper", help="figure title")
     compare.set_defaults(func=run_compare_command)
